@@ -1,0 +1,1 @@
+"""fixturecad: touch-sensing reference fixtures from contact group theory."""

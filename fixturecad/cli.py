@@ -1,0 +1,63 @@
+"""The ``fixturecad`` command: command groups from their own modules, one error path.
+
+Each command module holds a ``typer.Typer`` whose commands are merged here at
+the top level. Heavy imports (cadquery above all) happen inside the commands
+that need them, so ``fixturecad --help`` and the theory commands start fast.
+"""
+
+import sys
+
+import click
+import typer
+
+from fixturecad.errors import InputError
+from fixturecad.theory.commands import app as theory_app
+
+app = typer.Typer(
+    name="fixturecad",
+    help="Design, build and register touch-sensing reference fixtures.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+app.add_typer(theory_app)
+
+
+def _register_optional_groups() -> None:
+    """Command groups of the fixture and registration layers, if present."""
+    from importlib import import_module
+
+    for module in ("fixturecad.fixture_commands", "fixturecad.registration_commands"):
+        try:
+            group = import_module(module)
+        except ModuleNotFoundError as error:
+            if error.name != module:
+                raise
+            continue
+        app.add_typer(group.app)
+
+
+_register_optional_groups()
+
+
+def fail(message: str) -> None:
+    """Print one line on stderr and exit with code 2."""
+    print(f"fixturecad: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: usage errors and bad input are one line, exit 2."""
+    command = typer.main.get_command(app)
+    try:
+        code = command.main(args=argv, prog_name="fixturecad", standalone_mode=False)
+    except click.exceptions.UsageError as error:
+        fail(error.format_message().replace("\n", " "))
+    except InputError as error:
+        fail(str(error))
+    except click.exceptions.Abort:
+        fail("aborted")
+    except BrokenPipeError:
+        sys.stderr.close()
+        raise SystemExit(0)
+    raise SystemExit(code if isinstance(code, int) else 0)

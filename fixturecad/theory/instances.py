@@ -1,0 +1,126 @@
+"""Generic instances: two elements placed in contact at random, ready for the contact rows.
+
+A generic instance is what the paper calls a contact "in general": random
+contact point, normal, directions and radii, with no special alignment. The
+free motions, the class and every rank test are computed on such instances.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fixturecad.registration.contacts import CORE, ContactType, Side, contact_rows, make_side
+
+
+@dataclass
+class Instance:
+    """A contact placed at the identity pose, both sides in one frame.
+
+    ``points`` and ``lines`` name the geometric entities a free motion can be
+    described with (e.g. ``"the sphere centre"``): points (3,), lines
+    (point (3,), unit direction (3,)).
+    """
+
+    ctype: ContactType
+    sensor: Side
+    fixture: Side
+    rho: float
+    contact_point: np.ndarray
+    normal: np.ndarray
+    points: dict
+    lines: dict
+
+    def rows(self):
+        values, grads = contact_rows(self.ctype, self.sensor, self.fixture, self.rho)
+        return values, grads
+
+    def wrenches(self) -> np.ndarray:
+        """Constraint rows as covectors on twists (omega, v) of the fixture, shape (6 - d, 6)."""
+        _, grads = self.rows()
+        geometry = self.fixture.geometry
+        out = np.zeros((len(grads), 6))
+        for row, grad in enumerate(grads):
+            for (label, key), g in grad.items():
+                if label != "B":
+                    continue
+                g = np.reshape(g, 3)
+                out[row, :3] += np.cross(np.reshape(geometry[key], 3), g)
+                if key in ("o", "c", "p", "q"):
+                    out[row, 3:] += g
+        return out
+
+
+def _unit(rng, perpendicular_to=None):
+    v = rng.normal(size=3)
+    if perpendicular_to is not None:
+        v -= v.dot(perpendicular_to) * perpendicular_to
+    return v / np.linalg.norm(v)
+
+
+def generic_instance(ctype: ContactType, rng: np.random.Generator) -> Instance:
+    """Place the two elements of ``ctype`` in contact at a random spot."""
+    o = rng.uniform(-50.0, 50.0, size=3)
+    radii = {"A": rng.uniform(5.0, 30.0), "B": rng.uniform(5.0, 30.0)}
+    kinds = {"A": ctype.sensor, "B": ctype.fixture}
+    fixed = {"A": ctype.sensor_fixed, "B": ctype.fixture_fixed}
+    labels = {"A": "sensor", "B": "fixture"}
+    if kinds["A"] == "L" and kinds["B"] == "L":
+        dirs = {"A": _unit(rng), "B": _unit(rng)}
+        nz = np.cross(dirs["A"], dirs["B"])
+        nz /= np.linalg.norm(nz)
+    else:
+        nz = _unit(rng)
+        dirs = {side: (_unit(rng) if "P" in kinds.values() and kinds[side] == "L" else _unit(rng, nz))
+                for side in "AB"}
+    # A lies below the tangent plane (outward normal +nz), B above (outward normal -nz).
+    outward = {"A": nz, "B": -nz}
+    points, lines = {"the contact point": o}, {}
+    geometry = {}
+    for side in "AB":
+        kind, r, n_out = kinds[side], radii[side], outward[side]
+        who = labels[side]
+        if kind == "P":
+            g = {"c": o}
+        elif kind == "S":
+            g = {"c": o - r * n_out, "r": r}
+            points[f"the {who} sphere centre"] = g["c"]
+        elif kind == "C":
+            g = {"p": o - r * n_out, "d": dirs[side], "r": r}
+            lines[f"the {who} cylinder axis"] = (g["p"], g["d"])
+        elif kind == "L":
+            g = {"p": o, "d": dirs[side]}
+            lines[f"the {who} line"] = (o, dirs[side])
+        else:
+            g = {"q": o, "n": n_out}
+        geometry[side] = g
+    rho = 0.0
+    if ctype.is_locus:
+        plane_side = "A" if kinds["A"] == "PL" else "B"
+        other = "B" if plane_side == "A" else "A"
+        n_plane = geometry[plane_side]["n"]
+        if kinds[other] == "C":
+            # The axis runs parallel to the plane, one radius out along its normal.
+            geometry[other]["p"] = o + radii[other] * n_plane
+            rho = radii[other]
+            lines[f"the {labels[other]} cylinder axis"] = (geometry[other]["p"], geometry[other]["d"])
+            if fixed[other]:
+                geometry[other]["m"] = -n_plane
+        if kinds[other] in ("L", "C") and fixed[plane_side]:
+            geometry[plane_side]["e"] = geometry[other]["d"]
+            lines["the contact line"] = (o, geometry[other]["d"])
+    for side in "AB":
+        if fixed[side]:
+            geometry[side]["o"] = o
+            if kinds[side] in ("S", "C", "PL"):
+                geometry[side]["u"] = outward[side]
+    lines["the contact normal"] = (o, nz)
+    sides = {side: make_side(kinds[side], fixed[side], **geometry[side]) for side in "AB"}
+    if not ctype.is_locus:
+        mobile_core = [s for s in "AB" if not fixed[s]]
+        if len(mobile_core) == 1 and fixed["AB".replace(mobile_core[0], "")] and \
+                kinds["AB".replace(mobile_core[0], "")] in ("S", "C", "PL"):
+            rho = radii[mobile_core[0]] if kinds[mobile_core[0]] in ("S", "C") else 0.0
+        elif not fixed["A"] and not fixed["B"]:
+            values, _ = contact_rows(ctype, sides["A"], sides["B"], 0.0)
+            rho = float(values[0])
+    return Instance(ctype, sides["A"], sides["B"], rho, o, nz, points, lines)
