@@ -1,0 +1,439 @@
+"""Touch-sensing features of a fixture: analytic planes, spheres, cylinders, lines, points.
+
+Every feature lives in the fixture frame, in millimetres. Surfaces (plane,
+sphere, cylinder) bound the material: their normal points OUT of the
+material and ``signed_distance`` is positive outside. Spheres and cylinders
+are convex (material inside). Lines and points have no inside: their
+``signed_distance`` is the unsigned distance.
+
+Finite extent
+-------------
+A feature is only present on the solid over a finite patch. The patch is the
+part of the infinite feature that satisfies every constraint of its
+:class:`Extent`, all of them convex:
+
+``halfspaces``
+    ``[{"normal": n, "offset": h}]``: points with ``n . x <= h`` (n unit).
+``balls``
+    ``[{"center": c, "radius": r}]``: points with ``|x - c| <= r``.
+``cylinders``
+    ``[{"point": p, "axis": a, "radius": r}]``: points within distance r of
+    the infinite line through p along a (a unit).
+``interval``
+    ``[t0, t1]`` or ``null``: for cylinders and lines, the parameter
+    ``t = (x - point) . axis`` (or ``. direction``) lies in ``[t0, t1]``.
+
+``contains(points)`` projects each point on the feature (closest point) and
+tests the projection against the extent. A point feature has no extent.
+
+This module imports numpy only and nothing of fixturecad: it is inlined into
+the generated standalone ``register.py``.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+KINDS = ("plane", "sphere", "cylinder", "line", "point")
+ELEMENTS = {"plane": "PL", "sphere": "S", "cylinder": "C", "line": "L", "point": "P"}
+SENSING = ("mobile", "fixed")
+UNIT_TOLERANCE = 1e-9  # how far from 1 a given "unit" vector may be before it is refused
+
+
+def check_points(points, name="points"):
+    """Return ``points`` as a float64 array of shape (n, 3); raise ValueError otherwise.
+
+    A single point of shape (3,) becomes shape (1, 3).
+    """
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim == 1 and array.shape == (3,):
+        array = array[None, :]
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3) in mm, got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite, got NaN or inf")
+    return array
+
+
+def check_vector(vector, name="vector"):
+    """Return ``vector`` as a finite float64 array of shape (3,); raise ValueError otherwise."""
+    array = np.asarray(vector, dtype=np.float64)
+    if array.shape != (3,):
+        raise ValueError(f"{name} must have shape (3,), got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite, got {array.tolist()}")
+    return array
+
+
+def check_unit(vector, name="direction"):
+    """Return ``vector`` normalised to unit length; raise ValueError if it is (near) zero."""
+    array = check_vector(vector, name)
+    length = np.linalg.norm(array)
+    if length < 1e-12:
+        raise ValueError(f"{name} must be a non-zero vector, got {array.tolist()}")
+    return array / length
+
+
+def check_radius(radius, name="radius"):
+    value = float(radius)
+    if not np.isfinite(value) or value <= 0.0:
+        raise ValueError(f"{name} must be a positive finite number of mm, got {radius!r}")
+    return value
+
+
+def _perpendicular(direction):
+    """A unit vector perpendicular to the unit ``direction``."""
+    helper = np.eye(3)[int(np.argmin(np.abs(direction)))]
+    v = np.cross(direction, helper)
+    return v / np.linalg.norm(v)
+
+
+def _unit_rows(vectors, fallback):
+    """Normalise rows of ``vectors`` (n, 3); rows of zero length become ``fallback`` (3,)."""
+    length = np.linalg.norm(vectors, axis=1)
+    out = np.broadcast_to(fallback, vectors.shape).copy()
+    good = length > 1e-12
+    out[good] = vectors[good] / length[good, None]
+    return out
+
+
+@dataclass
+class Extent:
+    """The finite patch of a feature: an intersection of convex constraints (see module doc).
+
+    ``halfspaces`` (m, 4) rows ``[nx, ny, nz, h]``; ``balls`` (k, 4) rows
+    ``[cx, cy, cz, r]``; ``cylinders`` (j, 7) rows ``[px, py, pz, ax, ay, az, r]``;
+    ``interval`` ``(t0, t1)`` or None.
+    """
+
+    halfspaces: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    balls: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    cylinders: np.ndarray = field(default_factory=lambda: np.zeros((0, 7)))
+    interval: tuple | None = None
+
+    def __post_init__(self):
+        self.halfspaces = np.asarray(self.halfspaces, dtype=np.float64).reshape(-1, 4)
+        self.balls = np.asarray(self.balls, dtype=np.float64).reshape(-1, 4)
+        self.cylinders = np.asarray(self.cylinders, dtype=np.float64).reshape(-1, 7)
+        for vectors, name in ((self.halfspaces[:, :3], "halfspace normal"), (self.cylinders[:, 3:6], "cylinder axis")):
+            lengths = np.linalg.norm(vectors, axis=1)
+            if np.any(np.abs(lengths - 1.0) > 1e-6):
+                raise ValueError(f"extent {name}s must be unit vectors, got lengths {lengths.tolist()}")
+        if not (
+            np.all(np.isfinite(self.halfspaces))
+            and np.all(np.isfinite(self.balls))
+            and np.all(np.isfinite(self.cylinders))
+        ):
+            raise ValueError("extent constraints must be finite")
+        if self.interval is not None:
+            t0, t1 = (float(v) for v in self.interval)
+            if not (np.isfinite(t0) and np.isfinite(t1) and t0 <= t1):
+                raise ValueError(f"extent interval must be finite with t0 <= t1, got {self.interval!r}")
+            self.interval = (t0, t1)
+
+    @classmethod
+    def from_json(cls, data) -> "Extent":
+        data = data or {}
+        return cls(
+            halfspaces=[list(h["normal"]) + [h["offset"]] for h in data.get("halfspaces", [])],
+            balls=[list(b["center"]) + [b["radius"]] for b in data.get("balls", [])],
+            cylinders=[list(c["point"]) + list(c["axis"]) + [c["radius"]] for c in data.get("cylinders", [])],
+            interval=data.get("interval"),
+        )
+
+    def to_json(self) -> dict:
+        return {
+            "halfspaces": [{"normal": row[:3].tolist(), "offset": float(row[3])} for row in self.halfspaces],
+            "balls": [{"center": row[:3].tolist(), "radius": float(row[3])} for row in self.balls],
+            "cylinders": [
+                {"point": row[:3].tolist(), "axis": row[3:6].tolist(), "radius": float(row[6])}
+                for row in self.cylinders
+            ],
+            "interval": None if self.interval is None else [self.interval[0], self.interval[1]],
+        }
+
+    def margin(self, points, parameter=None):
+        """Smallest slack over all constraints, shape (n,) mm: >= 0 inside the patch.
+
+        ``parameter`` (n,) is the axial parameter t, needed when ``interval`` is set.
+        """
+        points = check_points(points)
+        slack = np.full(len(points), np.inf)
+        if len(self.halfspaces):
+            slack = np.minimum(slack, np.min(self.halfspaces[:, 3] - points @ self.halfspaces[:, :3].T, axis=1))
+        for row in self.balls:
+            slack = np.minimum(slack, row[3] - np.linalg.norm(points - row[:3], axis=1))
+        for row in self.cylinders:
+            r = points - row[:3]
+            w = r - np.outer(r @ row[3:6], row[3:6])
+            slack = np.minimum(slack, row[6] - np.linalg.norm(w, axis=1))
+        if self.interval is not None:
+            if parameter is None:
+                raise ValueError("this extent has an axial interval: give the parameter t")
+            slack = np.minimum(slack, np.minimum(parameter - self.interval[0], self.interval[1] - parameter))
+        return slack
+
+
+def _extent(extent):
+    if extent is None:
+        return Extent()
+    if isinstance(extent, Extent):
+        return extent
+    return Extent.from_json(extent)
+
+
+def _check_sensing(sensing):
+    if sensing not in SENSING:
+        raise ValueError(f"sensing must be one of {', '.join(SENSING)}, got {sensing!r}")
+    return sensing
+
+
+class _Feature:
+    """Shared behaviour; subclasses define the geometry."""
+
+    kind = ""
+
+    @property
+    def element(self) -> str:
+        """The paper's element letter: PL, S, C, L or P."""
+        return ELEMENTS[self.kind]
+
+    def contains(self, points, tol_mm=1e-6):
+        """Whether each point, projected on the feature, lies on its finite patch, shape (n,) bool."""
+        points = check_points(points)
+        projected = self.closest_point(points)
+        return self.extent.margin(projected, self._parameter(projected)) >= -tol_mm
+
+    def _parameter(self, points):
+        return None
+
+    def _common_json(self) -> dict:
+        return {"id": self.id, "kind": self.kind, "element": self.element, "sensing": self.sensing}
+
+
+@dataclass
+class Plane(_Feature):
+    """A planar face: ``point`` on it, unit ``normal`` out of the material."""
+
+    id: str
+    point: np.ndarray
+    normal: np.ndarray
+    extent: Extent = field(default_factory=Extent)
+    sensing: str = "mobile"
+    kind = "plane"
+
+    def __post_init__(self):
+        self.point = check_vector(self.point, "plane point")
+        self.normal = check_unit(self.normal, "plane normal")
+        self.extent = _extent(self.extent)
+        self.sensing = _check_sensing(self.sensing)
+
+    def signed_distance(self, points):
+        return (check_points(points) - self.point) @ self.normal
+
+    def closest_point(self, points):
+        points = check_points(points)
+        return points - np.outer(self.signed_distance(points), self.normal)
+
+    def normal_at(self, points):
+        return np.tile(self.normal, (len(check_points(points)), 1))
+
+    def to_json(self) -> dict:
+        return {
+            **self._common_json(),
+            "point": self.point.tolist(),
+            "normal": self.normal.tolist(),
+            "extent": self.extent.to_json(),
+        }
+
+
+@dataclass
+class Sphere(_Feature):
+    """A convex spherical face: ``center``, ``radius`` mm; material inside."""
+
+    id: str
+    center: np.ndarray
+    radius: float
+    extent: Extent = field(default_factory=Extent)
+    sensing: str = "mobile"
+    kind = "sphere"
+
+    def __post_init__(self):
+        self.center = check_vector(self.center, "sphere center")
+        self.radius = check_radius(self.radius, "sphere radius")
+        self.extent = _extent(self.extent)
+        self.sensing = _check_sensing(self.sensing)
+
+    def signed_distance(self, points):
+        return np.linalg.norm(check_points(points) - self.center, axis=1) - self.radius
+
+    def normal_at(self, points):
+        points = check_points(points)
+        return _unit_rows(points - self.center, np.array([0.0, 0.0, 1.0]))
+
+    def closest_point(self, points):
+        return self.center + self.radius * self.normal_at(points)
+
+    def to_json(self) -> dict:
+        return {
+            **self._common_json(),
+            "center": self.center.tolist(),
+            "radius": self.radius,
+            "extent": self.extent.to_json(),
+        }
+
+
+@dataclass
+class Cylinder(_Feature):
+    """A convex cylindrical face: axis through ``point`` along unit ``axis``, ``radius`` mm."""
+
+    id: str
+    point: np.ndarray
+    axis: np.ndarray
+    radius: float
+    extent: Extent = field(default_factory=Extent)
+    sensing: str = "mobile"
+    kind = "cylinder"
+
+    def __post_init__(self):
+        self.point = check_vector(self.point, "cylinder point")
+        self.axis = check_unit(self.axis, "cylinder axis")
+        self.radius = check_radius(self.radius, "cylinder radius")
+        self.extent = _extent(self.extent)
+        self.sensing = _check_sensing(self.sensing)
+
+    def _parameter(self, points):
+        return (check_points(points) - self.point) @ self.axis
+
+    def _radial(self, points):
+        points = check_points(points)
+        r = points - self.point
+        return r - np.outer(r @ self.axis, self.axis)
+
+    def signed_distance(self, points):
+        return np.linalg.norm(self._radial(points), axis=1) - self.radius
+
+    def normal_at(self, points):
+        return _unit_rows(self._radial(points), _perpendicular(self.axis))
+
+    def closest_point(self, points):
+        points = check_points(points)
+        return points - self._radial(points) + self.radius * self.normal_at(points)
+
+    def to_json(self) -> dict:
+        return {
+            **self._common_json(),
+            "point": self.point.tolist(),
+            "axis": self.axis.tolist(),
+            "radius": self.radius,
+            "extent": self.extent.to_json(),
+        }
+
+
+@dataclass
+class Line(_Feature):
+    """An edge: through ``point`` along unit ``direction``; ``signed_distance`` is unsigned."""
+
+    id: str
+    point: np.ndarray
+    direction: np.ndarray
+    extent: Extent = field(default_factory=Extent)
+    sensing: str = "mobile"
+    kind = "line"
+
+    def __post_init__(self):
+        self.point = check_vector(self.point, "line point")
+        self.direction = check_unit(self.direction, "line direction")
+        self.extent = _extent(self.extent)
+        self.sensing = _check_sensing(self.sensing)
+
+    def _parameter(self, points):
+        return (check_points(points) - self.point) @ self.direction
+
+    def _radial(self, points):
+        points = check_points(points)
+        r = points - self.point
+        return r - np.outer(r @ self.direction, self.direction)
+
+    def signed_distance(self, points):
+        return np.linalg.norm(self._radial(points), axis=1)
+
+    def normal_at(self, points):
+        """Unit direction from the line to each point (an arbitrary perpendicular on the line)."""
+        return _unit_rows(self._radial(points), _perpendicular(self.direction))
+
+    def closest_point(self, points):
+        points = check_points(points)
+        return points - self._radial(points)
+
+    def to_json(self) -> dict:
+        return {
+            **self._common_json(),
+            "point": self.point.tolist(),
+            "direction": self.direction.tolist(),
+            "extent": self.extent.to_json(),
+        }
+
+
+@dataclass
+class Point(_Feature):
+    """A point element (e.g. a vertex or a probe-able tip): no extent beyond itself."""
+
+    id: str
+    point: np.ndarray
+    sensing: str = "fixed"
+    kind = "point"
+
+    def __post_init__(self):
+        self.point = check_vector(self.point, "point")
+        self.sensing = _check_sensing(self.sensing)
+        self.extent = Extent()
+
+    def signed_distance(self, points):
+        return np.linalg.norm(check_points(points) - self.point, axis=1)
+
+    def normal_at(self, points):
+        return _unit_rows(check_points(points) - self.point, np.array([0.0, 0.0, 1.0]))
+
+    def closest_point(self, points):
+        return np.tile(self.point, (len(check_points(points)), 1))
+
+    def to_json(self) -> dict:
+        return {**self._common_json(), "point": self.point.tolist()}
+
+
+# ``normal`` is the geometry attribute of a plane (its unit normal), so the
+# method every feature has is ``normal_at(points)``. Features without a
+# ``normal`` attribute also answer to ``normal(points)``.
+for _cls in (Sphere, Cylinder, Line, Point):
+    _cls.normal = _cls.normal_at
+
+FEATURE_CLASSES = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder, "line": Line, "point": Point}
+_GEOMETRY_KEYS = {
+    "plane": ("point", "normal"),
+    "sphere": ("center", "radius"),
+    "cylinder": ("point", "axis", "radius"),
+    "line": ("point", "direction"),
+    "point": ("point",),
+}
+
+
+def feature_from_json(data: dict):
+    """Build a feature from its ``to_json`` dict (the ``features[]`` entries of features.json)."""
+    kind = data.get("kind")
+    if kind not in FEATURE_CLASSES:
+        raise ValueError(f"unknown feature kind {kind!r}; choose from {', '.join(KINDS)}")
+    missing = [key for key in ("id",) + _GEOMETRY_KEYS[kind] if key not in data]
+    if missing:
+        raise ValueError(f"{kind} feature is missing {', '.join(missing)}")
+    kwargs = {key: data[key] for key in _GEOMETRY_KEYS[kind]}
+    if kind != "point":
+        kwargs["extent"] = Extent.from_json(data.get("extent"))
+    if "sensing" in data:
+        kwargs["sensing"] = data["sensing"]
+    return FEATURE_CLASSES[kind](id=data["id"], **kwargs)
+
+
+def features_from_json(document: dict) -> dict:
+    """All features of a features.json document, by id."""
+    return {entry["id"]: feature_from_json(entry) for entry in document["features"]}

@@ -1,0 +1,97 @@
+"""Analytic features: distances, projections, extents, JSON round trip, no cadquery."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fixturecad.registration.features import (
+    Cylinder,
+    Extent,
+    Line,
+    Plane,
+    Point,
+    Sphere,
+    check_points,
+    feature_from_json,
+)
+
+RNG_SEED = 20261121
+
+
+def _examples():
+    half_disc = Extent(halfspaces=[[0, -1, 0, 0]], balls=[[0, 0, 0, 40]])
+    return [
+        Plane("flat", [0, 0, 0], [0, 0, -1], extent=half_disc),
+        Sphere("ball", [1, 2, 3], 40, extent=Extent(halfspaces=[[0, 0, -1, 0]])),
+        Cylinder("pin", [0, 0, 0], [0, 0, 1], 20, extent=Extent(interval=(-60, 0))),
+        Line("edge", [0, 0, 0], [1, 0, 0], extent=Extent(interval=(-40, 40))),
+        Point("tip", [5, 5, 5]),
+    ]
+
+
+@pytest.mark.parametrize("feature", _examples(), ids=lambda f: f.kind)
+def test_closest_point_lies_on_feature_and_distance_matches(feature):
+    rng = np.random.default_rng(RNG_SEED)
+    points = rng.uniform(-80, 80, size=(50, 3))
+    closest = feature.closest_point(points)
+    assert np.allclose(feature.signed_distance(closest), 0.0, atol=1e-9) or feature.kind == "point"
+    gap = np.linalg.norm(points - closest, axis=1)
+    assert np.allclose(np.abs(feature.signed_distance(points)), gap, atol=1e-9)
+    normals = feature.normal_at(points)
+    assert np.allclose(np.linalg.norm(normals, axis=1), 1.0)
+    if feature.kind in ("plane", "sphere", "cylinder"):
+        # outward normal: stepping along it increases the signed distance
+        assert np.all(feature.signed_distance(closest + 0.1 * normals) > 0)
+
+
+@pytest.mark.parametrize("feature", _examples(), ids=lambda f: f.kind)
+def test_json_round_trip(feature):
+    again = feature_from_json(feature.to_json())
+    assert again.to_json() == feature.to_json()
+    assert again.element == {"plane": "PL", "sphere": "S", "cylinder": "C", "line": "L", "point": "P"}[
+        feature.kind
+    ]
+
+
+def test_contains_respects_extent():
+    plane, sphere, cylinder, line, _ = _examples()
+    assert plane.contains([[0, 10, 3], [0, -10, 3], [0, 39.9, 0], [0, 41, 0]]).tolist() == [
+        True,
+        False,
+        True,
+        False,
+    ]
+    assert sphere.contains([[1, 2, -100], [1, 2, 100]]).tolist() == [False, True]
+    assert cylinder.contains([[20, 0, -1], [20, 0, 1]]).tolist() == [True, False]
+    assert line.contains([[39, 3, 0], [41, 0, 0]]).tolist() == [True, False]
+
+
+def test_normals_are_normalised_and_sensing_default():
+    plane = Plane("p", [0, 0, 0], [0, 0, -3])
+    assert np.allclose(plane.normal, [0, 0, -1])
+    assert plane.sensing == "mobile"
+    with pytest.raises(ValueError, match="sensing"):
+        Plane("p", [0, 0, 0], [0, 0, 1], sensing="maybe")
+
+
+def test_bad_shapes_raise_value_error_naming_the_shape():
+    with pytest.raises(ValueError, match=r"\(3, 2\)"):
+        check_points(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="non-zero"):
+        Plane("p", [0, 0, 0], [0, 0, 0])
+    with pytest.raises(ValueError, match="positive"):
+        Sphere("s", [0, 0, 0], -1)
+    with pytest.raises(ValueError, match="kind"):
+        feature_from_json({"id": "x", "kind": "torus"})
+
+
+def test_features_module_does_not_import_cadquery():
+    code = (
+        "import sys, fixturecad.registration.features\n"
+        "assert 'cadquery' not in sys.modules and 'OCP' not in sys.modules\n"
+        "assert not any(m.startswith('fixturecad.') and not m.startswith('fixturecad.registration')"
+        " for m in sys.modules if m != 'fixturecad')\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
