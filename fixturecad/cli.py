@@ -7,7 +7,6 @@ that need them, so ``fixturecad --help`` and the theory commands start fast.
 
 import sys
 
-import click
 import typer
 
 from fixturecad.errors import InputError
@@ -51,12 +50,15 @@ def main(argv: list[str] | None = None) -> None:
     command = typer.main.get_command(app)
     try:
         code = command.main(args=argv, prog_name="fixturecad", standalone_mode=False)
-    except click.exceptions.UsageError as error:
-        fail(error.format_message().replace("\n", " "))
     except InputError as error:
         fail(str(error))
-    except click.exceptions.Abort:
+    except (typer.Abort, KeyboardInterrupt):
         fail("aborted")
+    except Exception as error:
+        # Typer's usage errors (unknown option, bad value, missing argument) carry exit code 2.
+        if getattr(error, "exit_code", None) == 2 and hasattr(error, "format_message"):
+            fail(" ".join(error.format_message().split()))
+        raise
     except BrokenPipeError:
         sys.stderr.close()
         raise SystemExit(0)

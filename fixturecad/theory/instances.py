@@ -58,7 +58,11 @@ def _unit(rng, perpendicular_to=None):
 
 
 def generic_instance(ctype: ContactType, rng: np.random.Generator) -> Instance:
-    """Place the two elements of ``ctype`` in contact at a random spot."""
+    """Place the two elements of ``ctype`` in contact at a random spot.
+
+    The random draws depend on the elements only, not on F or M: the same
+    generator state gives the same geometry for every F/M variant of a pair.
+    """
     o = rng.uniform(-50.0, 50.0, size=3)
     radii = {"A": rng.uniform(5.0, 30.0), "B": rng.uniform(5.0, 30.0)}
     kinds = {"A": ctype.sensor, "B": ctype.fixture}
