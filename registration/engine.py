@@ -1,0 +1,705 @@
+"""Registration engine: the pose of a fixture from labelled touches.
+
+A touch plan is a list of :class:`TouchGroup`: touches of one contact type on
+one feature. Their residuals and twist Jacobians come from the contact model
+(:mod:`.contacts`); nothing here re-derives contact geometry. The engine
+
+1. initialises without a pose: the plane of three or more touches (closed
+   form) fixes one direction, a sweep about it with the translation solved by
+   Gauss-Newton (closed form from a sphere centre when one is touched) seeds
+   Levenberg-Marquardt; a nominal pose seeds it directly;
+2. keeps every distinct converged pose whose residual passes a chi-square
+   test and whose touches lie inside their features' finite extents;
+3. names the status ``unique``, ``ambiguous`` (with the touch that best
+   separates the candidates), ``inconsistent`` (with a touch flagged by a
+   robust refit when one explains it) or ``underdetermined`` (with the free
+   motions named relative to the features);
+4. gives the pose covariance ``sigma^2 (J^T J)^-1``, which at the true pose is
+   the Cramer-Rao bound for Gaussian touch noise of standard deviation sigma.
+
+Covariances are over (rotation vector rad, fixture origin mm), both in the
+measurement frame. This module imports numpy and scipy only and nothing of
+fixturecad: it is inlined into the generated standalone ``register.py``.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import gammaincinv
+
+from .contacts import ContactType, make_side, residuals_and_jacobian
+from .pose import (
+    apply_twist,
+    check_fixture2meas,
+    fixture2meas_from_rt,
+    origin_error_map,
+    rotation_aligning,
+    rotation_angle,
+    rotation_from_vector,
+    random_rotation,
+)
+
+DEFAULT_SIGMA_MM = 0.005  # touch noise standard deviation assumed by the chi-square test
+CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
+EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
+SWEEP_STEPS = 12  # angles tried about a measured plane normal when no pose is given
+FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
+SAME_POSE_ROTATION_RAD = 1e-4
+SAME_POSE_TRANSLATION_MM = 1e-3
+RANK_TOLERANCE = 1e-7  # singular values below this fraction of the largest count as zero
+POINT_CONTACT = "P/F"
+SENSOR_KIND = {"plane": "PL", "sphere": "S", "cylinder": "C", "line": "L", "point": "P"}
+
+
+@dataclass
+class TouchGroup:
+    """Touches of one contact type on one feature.
+
+    ``points`` (n, 3) mm in the measurement frame are the probe points (point
+    touches) or ball centres (ball-tip touches); None for other sensors.
+    ``index`` (n,) numbers the touches in the caller's order.
+    """
+
+    feature: object
+    ctype: ContactType
+    sensor: object
+    fixture: object
+    rho: np.ndarray
+    index: np.ndarray
+    points: np.ndarray | None = None
+    rows: int = 0
+
+    @property
+    def count(self) -> int:
+        return len(self.index)
+
+
+def fixture_side(feature, fixed: bool, **extra):
+    """The contact-model side of a feature in the fixture frame."""
+    kind = feature.kind
+    if kind == "plane":
+        return make_side("PL", fixed, q=feature.point, n=feature.normal, **extra)
+    if kind == "sphere":
+        return make_side("S", fixed, c=feature.center, r=feature.radius, **extra)
+    if kind == "cylinder":
+        return make_side("C", fixed, p=feature.point, d=feature.axis, r=feature.radius, **extra)
+    if kind == "line":
+        return make_side("L", fixed, p=feature.point, d=feature.direction, **extra)
+    return make_side("P", True, c=feature.point, o=feature.point, **extra)
+
+
+def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
+    """Point-probe touches (ball radius 0) or ball-tip centres on a feature."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = len(points)
+    fixture_element = SENSOR_KIND[feature.kind]
+    fixture_fixed = feature.kind == "point"
+    if ball_radius_mm > 0.0:
+        ctype = ContactType("S", False, fixture_element, fixture_fixed)
+        sensor = make_side("S", False, c=points, r=np.full(n, ball_radius_mm))
+        offset = {"plane": ball_radius_mm, "line": ball_radius_mm, "point": 0.0}
+        rho = offset.get(feature.kind, getattr(feature, "radius", 0.0) + ball_radius_mm)
+    else:
+        ctype = ContactType("P", True, fixture_element, fixture_fixed)
+        sensor = make_side("P", True, c=points, o=points)
+        rho = 0.0
+    group = TouchGroup(
+        feature, ctype, sensor, fixture_side(feature, fixture_fixed), np.full(n, float(rho)),
+        np.asarray(index), points,
+    )
+    values, _ = residuals_and_jacobian(ctype, sensor, group.fixture, np.eye(3), np.zeros(3), group.rho)
+    group.rows = values.shape[1]
+    return group
+
+
+def contact_touch(feature, contact: str, sensor: dict, index: int, rho=0.0, fixture=None) -> TouchGroup:
+    """One touch of any contact type: the sensor element's geometry in the measurement frame.
+
+    ``sensor`` holds the contact model's keys for the sensor side (see
+    ``contacts.make_side``); ``fixture`` optional extra fixture-frame keys of a
+    fixed fixture side (e.g. its known contact point ``o``).
+    """
+    ctype = ContactType.parse(contact)
+    if ctype.fixture != SENSOR_KIND[feature.kind]:
+        raise ValueError(
+            f"contact {contact} touches a {ctype.fixture} element but feature {feature.id} is a {feature.kind}"
+        )
+    geometry = {key: np.asarray(value, dtype=np.float64)[None] for key, value in sensor.items()}
+    side = make_side(ctype.sensor, ctype.sensor_fixed, **geometry)
+    extra = {key: np.asarray(value, dtype=np.float64) for key, value in (fixture or {}).items()}
+    fside = fixture_side(feature, ctype.fixture_fixed, **extra)
+    group = TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]))
+    values, _ = residuals_and_jacobian(ctype, side, fside, np.eye(3), np.zeros(3), group.rho)
+    group.rows = values.shape[1]
+    return group
+
+
+class Problem:
+    """A stacked touch plan: residuals (m,) and twist Jacobian (m, 6) at any pose."""
+
+    def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM):
+        self.groups = [g for g in groups if g.count]
+        self.sigma = float(sigma_mm)
+        self.row_touch = np.concatenate([np.repeat(g.index, g.rows) for g in self.groups]) if self.groups else np.zeros(0, int)
+        self.size = len(self.row_touch)
+
+    def evaluate(self, rotation, translation):
+        values, jacobians = [], []
+        for g in self.groups:
+            v, J = residuals_and_jacobian(g.ctype, g.sensor, g.fixture, rotation, translation, g.rho)
+            values.append(v.reshape(-1))
+            jacobians.append(J.reshape(-1, 6))
+        return np.concatenate(values), np.concatenate(jacobians)
+
+    def without(self, touch):
+        """The plan with one touch (by caller index) left out."""
+        groups = []
+        for g in self.groups:
+            keep = g.index != touch
+            if keep.all():
+                groups.append(g)
+            elif keep.any():
+                groups.append(_subset(g, keep))
+        return Problem(groups, self.sigma)
+
+    def scale(self):
+        """A length (mm) that balances rotation and translation columns of the Jacobian."""
+        pts = [g.points for g in self.groups if g.points is not None]
+        if not pts:
+            return 1.0
+        pts = np.concatenate(pts)
+        return max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
+
+
+def _subset(group, keep):
+    def cut(side):
+        geometry = {}
+        for key, value in side.geometry.items():
+            value = np.asarray(value)
+            geometry[key] = value[keep] if value.ndim >= 1 and value.shape[0] == len(keep) else value
+        return type(side)(side.kind, side.fixed, geometry)
+
+    sensor = cut(group.sensor)
+    rho = group.rho[keep]
+    points = None if group.points is None else group.points[keep]
+    return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows)
+
+
+def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60):
+    """Minimise the (weighted) sum of squared rows from a pose; return R, t, residuals, Jacobian."""
+    r, J = problem.evaluate(rotation, translation)
+    w = np.ones(len(r)) if weights is None else weights
+    cost = float(np.sum(w * r * r))
+    lam = 1e-4
+    for _ in range(max_iterations):
+        Jw = J * w[:, None]
+        A = J.T @ Jw
+        g = Jw.T @ r
+        diag = np.diag(A).copy()
+        diag[diag < 1e-12 * max(diag.max(), 1e-300)] = max(diag.max(), 1.0) * 1e-12
+        improved = False
+        for _ in range(12):
+            step = -np.linalg.solve(A + lam * np.diag(diag), g)
+            R2, t2 = apply_twist(rotation, translation, step)
+            r2, J2 = problem.evaluate(R2, t2)
+            cost2 = float(np.sum(w * r2 * r2))
+            if cost2 <= cost:
+                improved = True
+                break
+            lam *= 8.0
+        if not improved:
+            break
+        small = np.linalg.norm(step[:3]) < 1e-13 and np.linalg.norm(step[3:]) < 1e-11
+        tiny = cost - cost2 <= 1e-16 * max(cost, 1e-30) + 1e-30
+        rotation, translation, r, J, cost = R2, t2, r2, J2, cost2
+        lam = max(lam / 10.0, 1e-9)
+        if small or tiny:
+            break
+    return rotation, translation, r, J
+
+
+def _plane_normal(points):
+    """Closed form: unit normal of the plane through points (n >= 3), or None if collinear."""
+    centred = points - points.mean(axis=0)
+    _, s, vt = np.linalg.svd(centred, full_matrices=False)
+    if len(s) < 3 or s[1] < 1e-6 * max(s[0], 1e-12) or s[1] < 1e-6:
+        return None
+    return vt[2]
+
+
+def sphere_centres(points, radius):
+    """Closed form: candidate centres of a sphere of known radius through points (n >= 3)."""
+    points = np.asarray(points, float)
+    if len(points) >= 4:
+        A = np.hstack([2.0 * points, np.ones((len(points), 1))])
+        b = np.sum(points**2, axis=1)
+        sol, _, rank, _ = np.linalg.lstsq(A, b, rcond=None)
+        if rank == 4:
+            return [sol[:3]]
+    a, b, c = points[:3]
+    n = np.cross(b - a, c - a)
+    if np.linalg.norm(n) < 1e-9:
+        return []
+    # Circumcentre of the three points, then up and down the normal to the radius.
+    ab, ac = b - a, c - a
+    centre = a + (np.cross(n, ab) * (ac @ ac) + np.cross(ac, n) * (ab @ ab)) / (2.0 * (n @ n))
+    rc = np.linalg.norm(centre - a)
+    if rc > radius:
+        return [centre]
+    h = np.sqrt(radius**2 - rc**2)
+    u = n / np.linalg.norm(n)
+    return [centre + h * u, centre - h * u]
+
+
+def _anchor(feature):
+    for name in ("center", "point"):
+        if hasattr(feature, name):
+            return np.asarray(getattr(feature, name), float)
+    return np.zeros(3)
+
+
+def initial_poses(problem):
+    """Candidate starting poses (R, t) without a nominal pose: closed forms, then sweeps."""
+    point_groups = [g for g in problem.groups if g.points is not None]
+    rotations = []
+    planes = [g for g in point_groups if g.feature.kind == "plane" and g.count >= 3]
+    planes.sort(key=lambda g: -g.count)
+    for g in planes:
+        n_meas = _plane_normal(g.points)
+        if n_meas is None:
+            continue
+        for sign in (1.0, -1.0):
+            R0 = rotation_aligning(g.feature.normal, sign * n_meas)
+            for k in range(SWEEP_STEPS):
+                angle = 2.0 * np.pi * k / SWEEP_STEPS
+                rotations.append(rotation_from_vector(angle * n_meas) @ R0)
+        break
+    if not rotations:
+        rng = np.random.default_rng(0)
+        rotations = [random_rotation(rng) for _ in range(FALLBACK_STARTS)]
+    # Translation: sphere centres in closed form where a sphere is touched, else centroids.
+    centre_pairs = []
+    for g in point_groups:
+        if g.feature.kind == "sphere" and g.count >= 3:
+            for c in sphere_centres(g.points, g.feature.radius + (g.rho[0] - g.feature.radius if g.ctype.sensor == "S" else 0.0)):
+                centre_pairs.append((c, g.feature.center))
+            break
+    if point_groups:
+        measured = np.concatenate([g.points for g in point_groups]).mean(axis=0)
+        anchors = np.concatenate([np.tile(_anchor(g.feature), (g.count, 1)) for g in point_groups]).mean(axis=0)
+    else:
+        measured = anchors = np.zeros(3)
+    starts = []
+    for R in rotations:
+        if centre_pairs:
+            for c_meas, c_fix in centre_pairs:
+                starts.append((R, c_meas - R @ c_fix))
+        else:
+            starts.append((R, measured - R @ anchors))
+    return starts
+
+
+def _same_pose(a, b):
+    return (
+        rotation_angle(a[0] @ b[0].T) < SAME_POSE_ROTATION_RAD
+        and np.linalg.norm(a[1] - b[1]) < SAME_POSE_TRANSLATION_MM
+    )
+
+
+@dataclass
+class Solution:
+    rotation: np.ndarray
+    translation: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    rank: int = 6
+    passes: bool = True
+    admissible: bool = True
+    outside: list = field(default_factory=list)
+
+    @property
+    def fixture2meas(self):
+        return fixture2meas_from_rt(self.rotation, self.translation)
+
+    @property
+    def cost(self):
+        return float(self.residuals @ self.residuals)
+
+    @property
+    def rms(self):
+        return float(np.sqrt(np.mean(self.residuals**2))) if len(self.residuals) else 0.0
+
+
+def jacobian_rank(jacobian, length):
+    """Rank of a stacked Jacobian with rotation columns scaled by ``length`` mm."""
+    if len(jacobian) == 0:
+        return 0
+    scaled = jacobian / np.array([length] * 3 + [1.0] * 3)
+    s = np.linalg.svd(scaled, compute_uv=False)
+    return int(np.sum(s > RANK_TOLERANCE * max(s[0], 1e-300)))
+
+
+def chi_square_quantile(probability, dof):
+    """The chi-square quantile (scipy.stats.chi2.ppf without importing scipy.stats)."""
+    return 2.0 * float(gammaincinv(0.5 * dof, probability))
+
+
+def chi_square_passes(cost, rows, rank, sigma):
+    dof = max(rows - rank, 1)
+    return cost / sigma**2 <= chi_square_quantile(CHI2_CONFIDENCE, dof)
+
+
+def outside_extent(problem, rotation, translation, tolerance=EXTENT_TOLERANCE_MM):
+    """Touch indices whose contact, mapped into the fixture frame, lies off the feature's patch."""
+    bad = []
+    for g in problem.groups:
+        if g.points is None:
+            continue
+        local = (g.points - translation) @ rotation
+        inside = g.feature.contains(local, tolerance)
+        bad.extend(int(i) for i in g.index[~np.asarray(inside)])
+    return bad
+
+
+def solve(problem, initial_pose=None):
+    """All distinct local solutions from the starts, best first (list of Solution)."""
+    if initial_pose is not None:
+        T = check_fixture2meas(initial_pose)
+        starts = [(T[:3, :3], T[:3, 3])]
+    else:
+        starts = initial_poses(problem)
+        starts = _best_starts(problem, starts)
+    length = problem.scale()
+    solutions = []
+    for R, t in starts:
+        R, t, r, J = levenberg_marquardt(problem, R, t)
+        candidate = Solution(R, t, r, J)
+        if any(_same_pose((R, t), (s.rotation, s.translation)) for s in solutions):
+            continue
+        candidate.rank = jacobian_rank(J, length)
+        candidate.passes = chi_square_passes(candidate.cost, len(r), candidate.rank, problem.sigma)
+        candidate.outside = outside_extent(problem, R, t)
+        candidate.admissible = not candidate.outside
+        solutions.append(candidate)
+    solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
+    return solutions
+
+
+def _best_starts(problem, starts, keep=4):
+    """Polish each start's translation, then keep the lowest-cost distinct ones."""
+    scored = []
+    for R, t in starts:
+        for _ in range(2):
+            r, J = problem.evaluate(R, t)
+            Jt = J[:, 3:]
+            t = t - np.linalg.lstsq(Jt, r, rcond=None)[0]
+        r, _ = problem.evaluate(R, t)
+        scored.append((float(r @ r), R, t))
+    scored.sort(key=lambda item: item[0])
+    return [(R, t) for _, R, t in scored[:keep]]
+
+
+def covariance(jacobian, translation, sigma):
+    """Pose covariance (6, 6) over (rotation vector rad, fixture origin mm); None if singular."""
+    F = jacobian.T @ jacobian
+    try:
+        C = sigma**2 * np.linalg.inv(F)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(C)):
+        return None
+    A = origin_error_map(translation)
+    return A @ C @ A.T
+
+
+def cramer_rao_bound(problem, fixture2meas, sigma):
+    """Cramer-Rao bound (6, 6) of the pose for Gaussian row noise of standard deviation sigma."""
+    T = check_fixture2meas(fixture2meas)
+    _, J = problem.evaluate(T[:3, :3], T[:3, 3])
+    return covariance(J, T[:3, 3], sigma)
+
+
+def sigmas(cov):
+    """RMS translation (mm) and rotation (deg) standard deviations of a covariance."""
+    if cov is None:
+        return None, None
+    return float(np.sqrt(np.trace(cov[3:, 3:]))), float(np.degrees(np.sqrt(np.trace(cov[:3, :3]))))
+
+
+def robust_flag(problem, solution):
+    """A touch whose removal makes the residual pass, found by a Cauchy-weighted refit.
+
+    Returns (touch index, refit Solution) or None.
+    """
+    sigma = problem.sigma
+    R, t = solution.rotation, solution.translation
+    scale = 3.0 * sigma
+    r = solution.residuals
+    for _ in range(5):
+        weights = 1.0 / (1.0 + (r / scale) ** 2)
+        R, t, r, _ = levenberg_marquardt(problem, R, t, weights=weights, max_iterations=20)
+    per_touch = {}
+    for touch, value in zip(problem.row_touch, r):
+        per_touch[int(touch)] = per_touch.get(int(touch), 0.0) + float(value) ** 2
+    length = problem.scale()
+    for touch in sorted(per_touch, key=lambda k: -per_touch[k])[:3]:
+        reduced = problem.without(touch)
+        R2, t2, r2, J2 = levenberg_marquardt(reduced, R, t)
+        rank = jacobian_rank(J2, length)
+        if rank == 6 and len(r2) > 6 and chi_square_passes(float(r2 @ r2), len(r2), rank, sigma):
+            refit = Solution(R2, t2, r2, J2, rank)
+            refit.outside = outside_extent(reduced, R2, t2)
+            refit.admissible = not refit.outside
+            return touch, refit, float(np.sqrt(per_touch[touch]))
+    return None
+
+
+# ---------------------------------------------------------------- free motions
+
+
+def _feature_directions(problem, rotation):
+    """(description, unit direction in the measurement frame) of each touched feature."""
+    out = []
+    seen = set()
+    for g in problem.groups:
+        f = g.feature
+        if f.id in seen:
+            continue
+        seen.add(f.id)
+        if f.kind == "plane":
+            out.append((f"the normal of {f.id}", rotation @ f.normal, f))
+        elif f.kind == "cylinder":
+            out.append((f"the axis of {f.id}", rotation @ f.axis, f))
+        elif f.kind == "line":
+            out.append((f"the direction of {f.id}", rotation @ f.direction, f))
+    return out
+
+
+def _vec(v):
+    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+
+
+def free_motions(problem, solution):
+    """Names of the motions the touches do not constrain, relative to the features."""
+    length = problem.scale()
+    D = np.array([length] * 3 + [1.0] * 3)
+    scaled = solution.jacobian / D
+    _, s, vt = np.linalg.svd(scaled, full_matrices=True)
+    rank = solution.rank
+    null = (vt[rank:] / D).T  # (6, k) twists
+    if null.shape[1] == 0:
+        return []
+    R, t = solution.rotation, solution.translation
+    directions = _feature_directions(problem, R)
+    names = []
+    # Pure translations: the null space of the rotation part within the null space.
+    _, sw, vw = np.linalg.svd(null[:3], full_matrices=True)
+    rank_w = int(np.sum(sw > 1e-9 * max(np.abs(null).max(), 1e-300)))
+    trans = null @ vw[rank_w:].T  # (6, k - rank_w)
+    rot = null @ vw[:rank_w].T
+    if trans.shape[1]:
+        T_dirs = np.linalg.qr(trans[3:])[0]
+        if T_dirs.shape[1] == 1:
+            u = T_dirs[:, 0]
+            match = [name for name, d, _ in directions if abs(d @ u) > 0.999]
+            names.append("translation along " + (match[0] if match else _vec(u)))
+        elif T_dirs.shape[1] == 2:
+            n = np.cross(T_dirs[:, 0], T_dirs[:, 1])
+            match = [f.id for name, d, f in directions if f.kind == "plane" and abs(d @ n) > 0.999]
+            names.append("translation in the plane of " + match[0] if match else f"translation normal to {_vec(n)}")
+        else:
+            names.append("translation in every direction")
+    if rot.shape[1]:
+        omegas = rot[:3]
+        basis = np.linalg.qr(omegas)[0]
+        remaining = basis
+        for name, d, f in directions:
+            if remaining.shape[1] == 0:
+                break
+            proj = remaining @ (remaining.T @ d)
+            if np.linalg.norm(proj - d) < 1e-6:
+                names.append("rotation about " + name)
+                remaining = remaining - np.outer(d, d @ remaining)
+                q, sv, _ = np.linalg.svd(remaining, full_matrices=False)
+                remaining = q[:, sv > 1e-6]
+        for k in range(remaining.shape[1]):
+            w = remaining[:, k]
+            # The full null twist with this rotation part: v from least squares in the null space.
+            coeff = np.linalg.lstsq(null[:3], w, rcond=None)[0]
+            v = null[3:] @ coeff
+            point = np.cross(w, v) / (w @ w)
+            label = None
+            for g in problem.groups:
+                if g.points is not None and g.count >= 2:
+                    off = g.points - point
+                    dist = np.linalg.norm(off - np.outer(off @ w, w), axis=1)
+                    if np.all(dist < 1e-3 * length):
+                        label = f"the line through the touches on {g.feature.id}"
+                        break
+            if label is None:
+                for g in problem.groups:
+                    if g.feature.kind == "sphere":
+                        c = R @ g.feature.center + t
+                        off = c - point
+                        if np.linalg.norm(off - (off @ w) * w) < 1e-3 * length:
+                            label = f"an axis {_vec(w)} through the centre of {g.feature.id}"
+                            break
+            names.append("rotation about " + (label or f"the axis {_vec(w)} through {_vec(point)} mm"))
+    return names
+
+
+# ---------------------------------------------------------------- separating touch
+
+
+def _patch_samples(feature, count=400, seed=0):
+    """Points (fixture frame) on a feature's finite patch, for choosing an extra touch."""
+    rng = np.random.default_rng(seed)
+    kind = feature.kind
+    if kind == "point":
+        return feature.point[None]
+    size = 50.0
+    if kind == "plane":
+        from .contacts import perpendicular_basis
+
+        e1, e2 = perpendicular_basis(feature.normal)
+        uv = rng.uniform(-size, size, size=(count, 2))
+        pts = feature.point + uv[:, :1] * e1 + uv[:, 1:] * e2
+    elif kind == "sphere":
+        u = rng.normal(size=(count, 3))
+        pts = feature.center + feature.radius * u / np.linalg.norm(u, axis=1, keepdims=True)
+    elif kind == "cylinder":
+        from .contacts import perpendicular_basis
+
+        e1, e2 = perpendicular_basis(feature.axis)
+        lo, hi = feature.extent.interval or (-size, size)
+        s = rng.uniform(lo, hi, count)
+        a = rng.uniform(0, 2 * np.pi, count)
+        pts = feature.point + s[:, None] * feature.axis + feature.radius * (
+            np.cos(a)[:, None] * e1 + np.sin(a)[:, None] * e2
+        )
+    else:
+        lo, hi = feature.extent.interval or (-size, size)
+        pts = feature.point + np.linspace(lo, hi, count)[:, None] * feature.direction
+    inside = feature.contains(pts, 1e-6)
+    return pts[inside] if inside.any() else pts[:0]
+
+
+def separating_touch(features, solutions):
+    """The point touch that best tells the first two candidate poses apart."""
+    if len(solutions) < 2:
+        return None
+    a, b = solutions[0], solutions[1]
+    best = None
+    for feature in features.values():
+        if not hasattr(feature, "signed_distance"):
+            continue
+        pts = _patch_samples(feature)
+        if not len(pts):
+            continue
+        meas = pts @ a.rotation.T + a.translation
+        local_b = (meas - b.translation) @ b.rotation
+        gap = np.abs(feature.signed_distance(local_b))
+        k = int(np.argmax(gap))
+        if best is None or gap[k] > best["separation_mm"]:
+            best = {
+                "feature": feature.id,
+                "point_fixture_mm": pts[k].tolist(),
+                "point_meas_mm": meas[k].tolist(),
+                "separation_mm": float(gap[k]),
+            }
+    return best
+
+
+# ---------------------------------------------------------------- front door
+
+
+def build_groups(features, touches, ball_radius_mm=0.0, contacts=()):
+    """Touch groups from point touches by feature id and generic contact touches."""
+    groups, index = [], 0
+    for feature_id, points in touches.items():
+        if feature_id not in features:
+            raise ValueError(f"unknown feature {feature_id!r}; features are {', '.join(features)}")
+        pts = np.asarray(points, dtype=np.float64)
+        if pts.ndim == 1 and pts.size == 3:
+            pts = pts[None]
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ValueError(f"touches on {feature_id} must have shape (n, 3) in mm, got shape {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            raise ValueError(f"touches on {feature_id} must be finite, got NaN or inf")
+        if len(pts) == 0:
+            continue
+        ids = np.arange(index, index + len(pts))
+        index += len(pts)
+        groups.append(point_touches(features[feature_id], pts, ids, ball_radius_mm))
+    for contact in contacts:
+        feature_id = contact.get("feature")
+        if feature_id not in features:
+            raise ValueError(f"unknown feature {feature_id!r}; features are {', '.join(features)}")
+        groups.append(
+            contact_touch(
+                features[feature_id], contact["contact"], contact["sensor"], index,
+                contact.get("rho", 0.0), contact.get("fixture"),
+            )
+        )
+        index += 1
+    return groups
+
+
+def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
+                     contacts=()):
+    """Register a fixture from labelled touches; return the result dict (see module doc).
+
+    Parameters
+    ----------
+    features : dict id -> feature
+    touches : dict id -> array-like, shape (n, 3), mm, measurement frame
+    initial_pose : array-like, shape (4, 4), optional nominal ``fixture2meas``
+    sigma_mm : float, touch noise standard deviation for the chi-square test and covariance
+    ball_radius_mm : float, radius of a ball tip (0 for a point probe); touches are ball centres
+    contacts : list of dict, touches of other contact types (see ``contact_touch``)
+    """
+    groups = build_groups(features, touches, ball_radius_mm, contacts)
+    problem = Problem(groups, sigma_mm)
+    if problem.size < 1:
+        raise ValueError("no touches given")
+    solutions = solve(problem, initial_pose)
+    best = solutions[0]
+    result = {"flagged": [], "free_motions": [], "separating_touch": None, "outside_extent": best.outside}
+    good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
+    if best.rank < 6:
+        status = "underdetermined"
+        result["free_motions"] = free_motions(problem, best)
+    elif len(good) == 1:
+        status = "unique"
+        best = good[0]
+    elif len(good) > 1:
+        status = "ambiguous"
+        best = good[0]
+        result["separating_touch"] = separating_touch(features, good)
+    else:
+        status = "inconsistent"
+        flagged = robust_flag(problem, best) if problem.size > 7 else None
+        if flagged is not None:
+            touch, refit, size = flagged
+            feature_of = {int(i): g.feature.id for g in groups for i in g.index}
+            result["flagged"] = [{"touch": touch, "feature": feature_of[touch], "residual_mm": size}]
+            best = refit
+            good = [refit]
+    shown = good if good else [best]
+    cov = covariance(best.jacobian, best.translation, problem.sigma) if best.rank == 6 else None
+    s_t, s_r = sigmas(cov)
+    result.update(
+        {
+            "pose": best.fixture2meas.tolist(),
+            "status": status,
+            "rms_residual_mm": best.rms,
+            "solutions": [{"pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms} for s in shown],
+            "covariance": None if cov is None else cov.tolist(),
+            "sigma_translation_mm": s_t,
+            "sigma_rotation_deg": s_r,
+            "touches": int(sum(g.count for g in groups)),
+            "rows": problem.size,
+            "rank": best.rank,
+        }
+    )
+    return result

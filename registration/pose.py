@@ -1,0 +1,145 @@
+"""Rigid poses: rotation vectors, twists and the 4x4 ``fixture2meas`` transform.
+
+A pose maps the fixture frame to the measurement frame, ``p_meas = R p_fix + t``,
+written ``fixture2meas`` as a 4x4 homogeneous matrix. A spatial twist
+``(omega, v)`` (rad, mm) moves a pose by ``R <- exp(omega) R``,
+``t <- exp(omega) t + v``, the convention of the contact model's Jacobians.
+
+This module imports numpy only and nothing of fixturecad: it is inlined into
+the generated standalone ``register.py``.
+"""
+
+import numpy as np
+
+ORTHONORMAL_TOLERANCE = 1e-6  # largest |R^T R - I| entry accepted in a given 4x4
+
+
+def skew(w):
+    """The cross-product matrix of ``w`` (3,): ``skew(w) @ x == np.cross(w, x)``."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def rotation_from_vector(omega):
+    """Rodrigues: the rotation matrix exp([omega]) of a rotation vector (3,) rad."""
+    omega = np.asarray(omega, dtype=np.float64)
+    angle = float(np.linalg.norm(omega))
+    K = skew(omega)
+    if angle < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + (np.sin(angle) / angle) * K + ((1.0 - np.cos(angle)) / angle**2) * K @ K
+
+
+def vector_from_rotation(rotation):
+    """The rotation vector (3,) rad of a rotation matrix (inverse of ``rotation_from_vector``)."""
+    R = np.asarray(rotation, dtype=np.float64)
+    cos = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    angle = float(np.arccos(cos))
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-8:
+        return 0.5 * axis
+    if np.pi - angle < 1e-4:
+        # Near a half turn: the axis is the dominant column of R + I.
+        B = 0.5 * (R + np.eye(3))
+        k = int(np.argmax(np.diag(B)))
+        u = B[:, k] / np.sqrt(max(B[k, k], 1e-300))
+        if axis @ u < 0:
+            u = -u
+        return angle * u / np.linalg.norm(u)
+    return angle / (2.0 * np.sin(angle)) * axis
+
+
+def rotation_angle(rotation):
+    """Angle (rad) of a rotation matrix, accurate near 0 (atan2 of sine and cosine parts)."""
+    R = np.asarray(rotation, dtype=np.float64)
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return float(np.arctan2(0.5 * np.linalg.norm(axis), 0.5 * (np.trace(R) - 1.0)))
+
+
+def fixture2meas_from_rt(rotation, translation):
+    """The 4x4 ``fixture2meas`` of rotation (3, 3) and translation (3,) mm."""
+    T = np.eye(4)
+    T[:3, :3] = rotation
+    T[:3, 3] = translation
+    return T
+
+
+def check_fixture2meas(fixture2meas):
+    """Return a proper rigid 4x4 as float64; raise ValueError otherwise."""
+    T = np.asarray(fixture2meas, dtype=np.float64)
+    if T.shape != (4, 4):
+        raise ValueError(f"fixture2meas must have shape (4, 4), got shape {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise ValueError("fixture2meas must be finite, got NaN or inf")
+    R = T[:3, :3]
+    if np.max(np.abs(R.T @ R - np.eye(3))) > ORTHONORMAL_TOLERANCE or np.linalg.det(R) < 0:
+        raise ValueError("fixture2meas must be rigid: its 3x3 block is not a rotation")
+    if np.max(np.abs(T[3] - [0.0, 0.0, 0.0, 1.0])) > 1e-12:
+        raise ValueError("fixture2meas must have last row [0, 0, 0, 1]")
+    return T
+
+
+def rt_from_fixture2meas(fixture2meas):
+    """Rotation (3, 3) and translation (3,) of a checked 4x4 ``fixture2meas``."""
+    T = check_fixture2meas(fixture2meas)
+    return T[:3, :3].copy(), T[:3, 3].copy()
+
+
+def apply_twist(rotation, translation, twist):
+    """Move a pose by a spatial twist (omega, v): ``R <- exp(omega) R``, ``t <- exp(omega) t + v``."""
+    E = rotation_from_vector(twist[:3])
+    return E @ rotation, E @ translation + twist[3:]
+
+
+def twist_between(fixture2meas_a, fixture2meas_b):
+    """The spatial twist (6,) that moves pose a onto pose b (exactly, not to first order)."""
+    Ra, ta = fixture2meas_a[:3, :3], fixture2meas_a[:3, 3]
+    Rb, tb = fixture2meas_b[:3, :3], fixture2meas_b[:3, 3]
+    E = Rb @ Ra.T
+    return np.concatenate([vector_from_rotation(E), tb - E @ ta])
+
+
+def origin_error_map(translation):
+    """Matrix (6, 6) mapping a twist (omega, v) to (omega, change of the fixture origin).
+
+    A spatial twist moves the fixture origin ``t`` by ``omega x t + v``.
+    """
+    A = np.eye(6)
+    A[3:, :3] = -skew(translation)
+    return A
+
+
+def pose_errors(fixture2meas_est, fixture2meas_true):
+    """Translation error (mm, of the fixture origin) and rotation error (rad) between two poses."""
+    dt = float(np.linalg.norm(fixture2meas_est[:3, 3] - fixture2meas_true[:3, 3]))
+    dr = rotation_angle(fixture2meas_est[:3, :3] @ fixture2meas_true[:3, :3].T)
+    return dt, dr
+
+
+def random_rotation(rng):
+    """A rotation drawn uniformly (Haar) with a ``numpy.random.Generator``."""
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def rotation_aligning(a, b):
+    """A rotation taking unit vector ``a`` onto unit vector ``b`` (the shortest one)."""
+    a = np.asarray(a, float) / np.linalg.norm(a)
+    b = np.asarray(b, float) / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis)
+    c = float(a @ b)
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        helper = np.eye(3)[int(np.argmin(np.abs(a)))]
+        axis = np.cross(a, helper)
+        return rotation_from_vector(np.pi * axis / np.linalg.norm(axis))
+    return rotation_from_vector(np.arctan2(s, c) * axis / s)
