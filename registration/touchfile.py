@@ -1,0 +1,168 @@
+"""Touch files and the command line of the generated ``register.py``.
+
+A CSV touch file has the header ``feature,x,y,z``: one touch per line, the
+feature id of features.json and the probe point (or ball centre) in mm in the
+measurement frame. A JSON touch file holds contacts of any type::
+
+    {"ball_radius_mm": 0.0,
+     "touches": [{"feature": "flat_a", "point": [x, y, z]},
+                 {"feature": "base", "contact": "PL/F-PL/F",
+                  "sensor": {"q": [...], "n": [...], "o": [...], "u": [...]}, "rho": 0.0}]}
+
+Errors are ``ValueError`` with a one-line message. This module imports numpy
+only and nothing of fixturecad: it is inlined into the generated standalone
+``register.py``.
+"""
+
+import argparse
+import csv
+import io
+import json
+import sys
+
+import numpy as np
+
+CSV_COLUMNS = ("feature", "x", "y", "z")
+MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
+
+
+def read_touch_csv(text, feature_ids):
+    """Touches by feature id, each an array (n, 3) mm, from CSV text."""
+    if not text.strip():
+        raise ValueError("the touch file is empty")
+    rows = list(csv.reader(io.StringIO(text)))
+    header = tuple(cell.strip().lower() for cell in rows[0])
+    if header != CSV_COLUMNS:
+        raise ValueError(f"touch CSV must have the columns {','.join(CSV_COLUMNS)}, got {','.join(header)}")
+    touches = {}
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or all(not cell.strip() for cell in row):
+            continue
+        if len(row) != 4:
+            raise ValueError(f"line {line}: expected 4 values (feature,x,y,z), got {len(row)}")
+        _check_id(row[0].strip(), feature_ids, f"line {line}")
+        try:
+            point = [float(cell) for cell in row[1:]]
+        except ValueError:
+            raise ValueError(f"line {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
+        if not np.all(np.isfinite(point)):
+            raise ValueError(f"line {line}: coordinates must be finite, got {','.join(row[1:])}")
+        touches.setdefault(row[0].strip(), []).append(point)
+    if not touches:
+        raise ValueError("the touch file has a header but no touches")
+    return {key: np.array(value) for key, value in touches.items()}
+
+
+def read_touch_json(text, feature_ids):
+    """Point touches by feature id, the other contacts, and the ball radius, from JSON text."""
+    if not text.strip():
+        raise ValueError("the touch file is empty")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"touch JSON is not valid JSON: {error.msg} at line {error.lineno}") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("touches"), list):
+        raise ValueError('touch JSON must be an object with a "touches" list')
+    touches, contacts = {}, []
+    for k, entry in enumerate(doc["touches"]):
+        where = f"touch {k}"
+        if not isinstance(entry, dict):
+            raise ValueError(f"{where}: expected an object")
+        _check_id(entry.get("feature"), feature_ids, where)
+        if "contact" in entry:
+            sensor = entry.get("sensor")
+            if not isinstance(sensor, dict):
+                raise ValueError(f"{where}: a {entry['contact']} contact needs the sensor geometry")
+            for key, value in sensor.items():
+                _check_finite(value, f"{where}: sensor {key}")
+            contacts.append(entry)
+        else:
+            point = _check_finite(entry.get("point"), f"{where}: point")
+            if point.shape != (3,):
+                raise ValueError(f"{where}: point must be [x, y, z] in mm")
+            touches.setdefault(entry["feature"], []).append(point)
+    if not touches and not contacts:
+        raise ValueError("the touch file has no touches")
+    radius = float(doc.get("ball_radius_mm", 0.0))
+    return {key: np.array(value) for key, value in touches.items()}, contacts, radius
+
+
+def _check_id(feature_id, feature_ids, where):
+    if feature_id not in feature_ids:
+        raise ValueError(f"{where}: unknown feature {feature_id!r}; features are {', '.join(feature_ids)}")
+
+
+def _check_finite(value, where):
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where} must be numbers, got {value!r}") from None
+    if array.size == 0 or not np.all(np.isfinite(array)):
+        raise ValueError(f"{where} must be finite numbers, got {value!r}")
+    return array
+
+
+def read_touch_file(path, feature_ids):
+    """(touches, contacts, ball radius) from a .csv or .json touch file."""
+    try:
+        with open(path, encoding="utf-8") as handle:
+            text = handle.read()
+    except OSError as error:
+        raise ValueError(f"cannot read touch file {path}: {error.strerror}") from None
+    if str(path).lower().endswith(".json"):
+        return read_touch_json(text, feature_ids)
+    return read_touch_csv(text, feature_ids), [], 0.0
+
+
+def check_enough(features, touches, contacts, ball_radius_mm):
+    """Refuse a touch set with fewer constraint rows than a pose needs."""
+    from .engine import Problem, build_groups
+
+    rows = Problem(build_groups(features, touches, ball_radius_mm, contacts)).size
+    if rows < MIN_ROWS:
+        count = sum(len(v) for v in touches.values()) + len(contacts)
+        raise ValueError(f"too few touches: {count} touches give {rows} constraints, a pose needs at least {MIN_ROWS}")
+
+
+def format_result(result):
+    """A short human-readable report of a registration result."""
+    lines = [f"status: {result['status']}", f"rms residual: {result['rms_residual_mm']:.6f} mm"]
+    if result["sigma_translation_mm"] is not None:
+        lines.append(
+            f"sigma: {result['sigma_translation_mm']:.6f} mm, {result['sigma_rotation_deg']:.6f} deg"
+        )
+    lines.append("fixture2meas:")
+    lines.extend("  " + " ".join(f"{x:12.6f}" for x in row) for row in result["pose"])
+    if len(result["solutions"]) > 1:
+        lines.append(f"{len(result['solutions'])} solutions pass the residual test")
+    for motion in result["free_motions"]:
+        lines.append(f"free: {motion}")
+    for flag in result["flagged"]:
+        lines.append(f"flagged: touch {flag['touch']} on {flag['feature']} ({flag['residual_mm']:.4f} mm off)")
+    if result["separating_touch"]:
+        s = result["separating_touch"]
+        lines.append(f"separating touch: {s['feature']} at {s['point_meas_mm']} (separates by {s['separation_mm']:.3f} mm)")
+    return "\n".join(lines)
+
+
+def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.005):
+    """Command line: ``register.py touches.csv [--json]``; bad input is one line, exit 2."""
+    parser = argparse.ArgumentParser(prog=prog, description="Pose of the fixture from touches.")
+    parser.add_argument("touches", help="touch file: CSV feature,x,y,z (mm) or JSON")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument("--sigma", type=float, default=default_sigma_mm, help="touch noise, mm")
+    parser.add_argument("--ball-radius", type=float, default=None, help="ball tip radius, mm")
+    args = parser.parse_args(argv)
+    try:
+        if not np.isfinite(args.sigma) or args.sigma <= 0:
+            raise ValueError(f"--sigma must be a positive number of mm, got {args.sigma}")
+        touches, contacts, radius = read_touch_file(args.touches, list(features))
+        if args.ball_radius is not None:
+            radius = args.ball_radius
+        check_enough(features, touches, contacts, radius)
+        result = register(touches, sigma_mm=args.sigma, ball_radius_mm=radius, contacts=contacts)
+    except ValueError as error:
+        print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
+        return 2
+    print(json.dumps(result, indent=2) if args.json else format_result(result))
+    return 0
