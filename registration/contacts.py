@@ -281,11 +281,15 @@ def _mobile_mobile(rows, A, a, B, b, rho):
         r = g1["c"] - g2["q"]
         rows.add(_dot(g2["n"], r) - rho, {(l1, "c"): g2["n"], (l2, "q"): -g2["n"], (l2, "n"): r})
     elif cores == ("line", "line"):
+        # Unsigned distance between the lines: the sign of a cross product flips
+        # when the lines turn past parallel, the distance does not.
         r = g1["p"] - g2["p"]
-        m = np.cross(g1["d"], g2["d"])
+        cross = np.cross(g1["d"], g2["d"])
+        sign = np.where(_dot(r, cross) < 0, -1.0, 1.0)[..., None]
+        m = sign * cross
         size = np.linalg.norm(m, axis=-1)[..., None]
         value = _dot(r, m) / size[..., 0]
-        g_m = (r - value[..., None] * m / size) / size
+        g_m = sign * (r - value[..., None] * m / size) / size  # gradient with respect to the cross product
         rows.add(
             value - rho,
             {

@@ -116,7 +116,7 @@ def _orthonormal(rows):
 def _is_minimal(blocks, target_rank) -> bool:
     for skip in range(len(blocks)):
         rest = [block for i, block in enumerate(blocks) if i != skip]
-        if _rank(np.vstack(rest)) >= target_rank:
+        if rest and _rank(np.vstack(rest)) >= target_rank:
             return False
     return True
 

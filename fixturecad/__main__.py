@@ -1,0 +1,3 @@
+from fixturecad.cli import main
+
+main()
