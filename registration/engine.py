@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import gammaincinv
 
-from .contacts import ContactType, make_side, residuals_and_jacobian
+from .contacts import DIRECTION_KEYS, POINT_KEYS, ContactType, make_side, residuals_and_jacobian
 from .pose import (
     apply_twist,
     check_fixture2meas,
@@ -42,7 +42,7 @@ from .pose import (
 DEFAULT_SIGMA_MM = 0.005  # touch noise standard deviation assumed by the chi-square test
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
-SWEEP_STEPS = 12  # angles tried about a measured plane normal when no pose is given
+SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
 SAME_POSE_ROTATION_RAD = 1e-4
 SAME_POSE_TRANSLATION_MM = 1e-3
@@ -112,21 +112,55 @@ def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
     return group
 
 
-def contact_touch(feature, contact: str, sensor: dict, index: int, rho=0.0, fixture=None) -> TouchGroup:
+def sensor_geometry(ctype, sensor, contact_point=None):
+    """Contact-model keys of a sensor element, measurement frame.
+
+    ``sensor`` is either the touch-plan form ``{"kind": "plane", "point",
+    "normal"}`` / ``{"kind": "line", "point", "direction"}`` /
+    ``{"kind": "sphere" | "cylinder", ..., "radius"}``, or the contact model's
+    keys (``q``, ``n``, ``p``, ``d``, ``c``, ``r``, ``o``...) directly.
+    ``contact_point`` (3,) mm is the known contact point of a fixed sensor.
+    """
+    if "kind" not in sensor:
+        geometry = {key: np.asarray(value, dtype=np.float64) for key, value in sensor.items()}
+    else:
+        kind = sensor["kind"]
+        names = {"plane": {"point": "q", "normal": "n"}, "line": {"point": "p", "direction": "d"},
+                 "sphere": {"center": "c", "radius": "r"}, "cylinder": {"point": "p", "axis": "d", "radius": "r"},
+                 "point": {"point": "c"}}
+        if kind not in names:
+            raise ValueError(f"unknown sensor kind {kind!r}; choose from {', '.join(names)}")
+        geometry = {names[kind][key]: np.asarray(value, dtype=np.float64)
+                    for key, value in sensor.items() if key in names[kind]}
+        for key in ("n", "d"):
+            if key in geometry:
+                geometry[key] = geometry[key] / np.linalg.norm(geometry[key])
+    if ctype.sensor_fixed and "o" not in geometry:
+        if contact_point is None:
+            if ctype.sensor != "P":
+                raise ValueError(f"a fixed {ctype.sensor} sensor needs its contact point")
+            contact_point = geometry["c"]
+        geometry["o"] = np.asarray(contact_point, dtype=np.float64)
+    return geometry
+
+
+def contact_touch(feature, contact: str, sensor: dict, index: int, rho=0.0, fixture=None,
+                  contact_point=None) -> TouchGroup:
     """One touch of any contact type: the sensor element's geometry in the measurement frame.
 
-    ``sensor`` holds the contact model's keys for the sensor side (see
-    ``contacts.make_side``); ``fixture`` optional extra fixture-frame keys of a
-    fixed fixture side (e.g. its known contact point ``o``).
+    ``sensor`` see :func:`sensor_geometry`; ``fixture`` optional extra
+    fixture-frame keys of a fixed fixture side (its known contact point ``o``).
     """
     ctype = ContactType.parse(contact)
     if ctype.fixture != SENSOR_KIND[feature.kind]:
         raise ValueError(
             f"contact {contact} touches a {ctype.fixture} element but feature {feature.id} is a {feature.kind}"
         )
-    geometry = {key: np.asarray(value, dtype=np.float64)[None] for key, value in sensor.items()}
+    geometry = {key: value[None] for key, value in sensor_geometry(ctype, sensor, contact_point).items()}
     side = make_side(ctype.sensor, ctype.sensor_fixed, **geometry)
     extra = {key: np.asarray(value, dtype=np.float64) for key, value in (fixture or {}).items()}
+    if ctype.fixture_fixed and "o" in extra and "u" not in extra and feature.kind in ("plane", "sphere", "cylinder"):
+        extra["u"] = feature.normal_at(extra["o"])[0]
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
     group = TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]))
     values, _ = residuals_and_jacobian(ctype, side, fside, np.eye(3), np.zeros(3), group.rho)
@@ -150,6 +184,33 @@ class Problem:
             values.append(v.reshape(-1))
             jacobians.append(J.reshape(-1, 6))
         return np.concatenate(values), np.concatenate(jacobians)
+
+    def evaluate_batch(self, rotations, translations):
+        """Residuals (K, m) and fixture-frame Jacobians (K, m, 6) at K poses in one call.
+
+        Each pose's sensors are mapped into the fixture frame (``R^T (x - t)``),
+        all K copies stacked into one call of the contact model at the identity.
+        The translation columns give the fixture-frame translation ``v`` that
+        moves the pose to ``t + R v``.
+        """
+        K = len(rotations)
+        values, jacobians = [], []
+        for g in self.groups:
+            geometry = {}
+            for key, value in g.sensor.geometry.items():
+                value = np.broadcast_to(value, (g.count,) + np.shape(value)[1:] if np.ndim(value) else (g.count,))
+                if key in POINT_KEYS:
+                    moved = np.einsum("kji,knj->kni", rotations, value[None] - translations[:, None])
+                elif key in DIRECTION_KEYS:
+                    moved = np.einsum("kji,knj->kni", rotations, np.broadcast_to(value, (K,) + value.shape))
+                else:
+                    moved = np.broadcast_to(value, (K,) + value.shape)
+                geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
+            sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
+            v, J = residuals_and_jacobian(g.ctype, sensor, g.fixture, np.eye(3), np.zeros(3), np.tile(g.rho, K))
+            values.append(v.reshape(K, -1))
+            jacobians.append(J.reshape(K, -1, 6))
+        return np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1)
 
     def without(self, touch):
         """The plan with one touch (by caller index) left out."""
@@ -251,6 +312,26 @@ def sphere_centres(points, radius):
     return [centre + h * u, centre - h * u]
 
 
+def _plane_directions(problem):
+    """(fixture normal, measured normal up to sign) pairs, best determined first.
+
+    Closed forms: a sensing plane lying on a fixture plane gives the normal
+    directly; three or more point or ball touches on a plane give it by a fit.
+    """
+    pairs = []
+    for g in problem.groups:
+        if g.feature.kind != "plane":
+            continue
+        if g.ctype.sensor == "PL" and g.ctype.is_locus:
+            pairs.append((np.inf, g.feature.normal, g.sensor["n"].reshape(-1, 3)[0]))
+        elif g.points is not None and g.count >= 3:
+            n_meas = _plane_normal(g.points)
+            if n_meas is not None:
+                pairs.append((g.count, g.feature.normal, n_meas))
+    pairs.sort(key=lambda item: -item[0])
+    return [(a, b) for _, a, b in pairs]
+
+
 def _anchor(feature):
     for name in ("center", "point"):
         if hasattr(feature, name):
@@ -261,29 +342,37 @@ def _anchor(feature):
 def initial_poses(problem):
     """Candidate starting poses (R, t) without a nominal pose: closed forms, then sweeps."""
     point_groups = [g for g in problem.groups if g.points is not None]
+    centres = _sphere_centre_candidates(point_groups)
     rotations = []
-    planes = [g for g in point_groups if g.feature.kind == "plane" and g.count >= 3]
-    planes.sort(key=lambda g: -g.count)
-    for g in planes:
-        n_meas = _plane_normal(g.points)
-        if n_meas is None:
-            continue
+    for n_fix, n_meas in _plane_directions(problem):
         for sign in (1.0, -1.0):
-            R0 = rotation_aligning(g.feature.normal, sign * n_meas)
+            R0 = rotation_aligning(n_fix, sign * n_meas)
             for k in range(SWEEP_STEPS):
                 angle = 2.0 * np.pi * k / SWEEP_STEPS
                 rotations.append(rotation_from_vector(angle * n_meas) @ R0)
         break
+    if len(centres) >= 3 and not rotations:
+        # Closed form: Kabsch on three or more sphere centres, one start per candidate set.
+        fixed = np.array([f for f, _ in centres])
+        starts = []
+        for combo in _combinations([m for _, m in centres]):
+            R, t = kabsch(fixed, np.array(combo))
+            if R is not None:
+                starts.append((R, t))
+        if starts:
+            return starts
+    if len(centres) >= 2 and not rotations:
+        # The line through two sphere centres fixes a direction: sweep about it.
+        (f1, m1), (f2, m2) = centres[:2]
+        for c1 in m1:
+            for c2 in m2:
+                axis = (c2 - c1) / max(np.linalg.norm(c2 - c1), 1e-12)
+                R0 = rotation_aligning(f2 - f1, axis)
+                for k in range(SWEEP_STEPS):
+                    rotations.append(rotation_from_vector(2.0 * np.pi * k / SWEEP_STEPS * axis) @ R0)
     if not rotations:
         rng = np.random.default_rng(0)
         rotations = [random_rotation(rng) for _ in range(FALLBACK_STARTS)]
-    # Translation: sphere centres in closed form where a sphere is touched, else centroids.
-    centre_pairs = []
-    for g in point_groups:
-        if g.feature.kind == "sphere" and g.count >= 3:
-            for c in sphere_centres(g.points, g.feature.radius + (g.rho[0] - g.feature.radius if g.ctype.sensor == "S" else 0.0)):
-                centre_pairs.append((c, g.feature.center))
-            break
     if point_groups:
         measured = np.concatenate([g.points for g in point_groups]).mean(axis=0)
         anchors = np.concatenate([np.tile(_anchor(g.feature), (g.count, 1)) for g in point_groups]).mean(axis=0)
@@ -291,12 +380,46 @@ def initial_poses(problem):
         measured = anchors = np.zeros(3)
     starts = []
     for R in rotations:
-        if centre_pairs:
-            for c_meas, c_fix in centre_pairs:
-                starts.append((R, c_meas - R @ c_fix))
+        if centres:
+            # Translation in closed form from a sphere centre.
+            f, ms = centres[0]
+            starts.extend((R, m - R @ f) for m in ms[:1])
         else:
             starts.append((R, measured - R @ anchors))
     return starts
+
+
+def _sphere_centre_candidates(point_groups):
+    """(fixture centre, [measured centre candidates]) of touched spheres, best determined first."""
+    out = []
+    for g in point_groups:
+        if g.feature.kind == "sphere" and g.count >= 3:
+            radius = g.rho[0] if g.ctype.sensor == "S" else g.feature.radius
+            candidates = sphere_centres(g.points, radius)
+            if candidates:
+                out.append((len(candidates), g.feature.center, candidates))
+    out.sort(key=lambda item: item[0])
+    return [(f, m) for _, f, m in out]
+
+
+def _combinations(lists, limit=16):
+    combos = [[]]
+    for options in lists:
+        combos = [c + [o] for c in combos for o in options][:limit]
+    return combos
+
+
+def kabsch(fixed_points, measured_points):
+    """Closed form: the rotation and translation best mapping fixture points onto measured ones."""
+    a, b = np.asarray(fixed_points, float), np.asarray(measured_points, float)
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    H = (a - ca).T @ (b - cb)
+    U, S, Vt = np.linalg.svd(H)
+    if S[1] < 1e-9 * max(S[0], 1e-300):
+        return None, None
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return R, cb - R @ ca
 
 
 def _same_pose(a, b):
@@ -385,18 +508,34 @@ def solve(problem, initial_pose=None):
     return solutions
 
 
-def _best_starts(problem, starts, keep=4):
-    """Polish each start's translation, then keep the lowest-cost distinct ones."""
-    scored = []
-    for R, t in starts:
-        for _ in range(2):
-            r, J = problem.evaluate(R, t)
-            Jt = J[:, 3:]
-            t = t - np.linalg.lstsq(Jt, r, rcond=None)[0]
-        r, _ = problem.evaluate(R, t)
-        scored.append((float(r @ r), R, t))
-    scored.sort(key=lambda item: item[0])
-    return [(R, t) for _, R, t in scored[:keep]]
+def _best_starts(problem, starts, keep=6):
+    """Solve each start's translation (batched Gauss-Newton), keep the best local minima.
+
+    Starts come in sweeps of ``SWEEP_STEPS`` angles; a start is kept when its
+    cost is no higher than its two neighbours in the sweep.
+    """
+    if not starts:
+        return []
+    Rs = np.array([R for R, _ in starts])
+    ts = np.array([t for _, t in starts], dtype=float)
+    for _ in range(2):
+        r, J = problem.evaluate_batch(Rs, ts)
+        Jv = J[:, :, 3:]
+        A = np.einsum("kmi,kmj->kij", Jv, Jv) + 1e-9 * np.eye(3)
+        b = np.einsum("kmi,km->ki", Jv, r)
+        v = -np.linalg.solve(A, b[..., None])[..., 0]
+        ts = ts + np.einsum("kij,kj->ki", Rs, v)
+    predicted = r + np.einsum("kmi,ki->km", Jv, v)
+    cost = np.sum(predicted**2, axis=1)
+    order = np.argsort(cost)
+    K = len(starts)
+    if K % SWEEP_STEPS == 0 and K > SWEEP_STEPS - 1:
+        sweep = cost.reshape(-1, SWEEP_STEPS)
+        minima = (sweep <= np.roll(sweep, 1, axis=1)) & (sweep <= np.roll(sweep, -1, axis=1))
+        chosen = [k for k in order if minima.reshape(-1)[k]]
+    else:
+        chosen = list(order)
+    return [(Rs[k], ts[k]) for k in chosen[:keep]]
 
 
 def covariance(jacobian, translation, sigma):
@@ -638,7 +777,7 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=()):
         groups.append(
             contact_touch(
                 features[feature_id], contact["contact"], contact["sensor"], index,
-                contact.get("rho", 0.0), contact.get("fixture"),
+                contact.get("rho", 0.0), contact.get("fixture"), contact.get("point"),
             )
         )
         index += 1
@@ -703,3 +842,36 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         }
     )
     return result
+
+
+def plan_touches(entries, fixture2meas):
+    """Touches a touch plan (fixture-frame entries) produces at a pose, for :func:`register_touches`.
+
+    Returns (touches by feature id, contacts): point entries become probe
+    points; entries with a sensor become contacts with the sensor mapped to
+    the measurement frame and a fixed fixture side's known point attached.
+    """
+    T = check_fixture2meas(fixture2meas)
+    R, t = T[:3, :3], T[:3, 3]
+    touches, contacts = {}, []
+    for entry in entries:
+        points = np.asarray(entry["points"], dtype=np.float64).reshape(-1, 3)
+        if "sensor" not in entry:
+            touches.setdefault(entry["feature"], []).extend(points @ R.T + t)
+            continue
+        ctype = ContactType.parse(entry["contact"])
+        for point in points:
+            sensor = {"kind": entry["sensor"]["kind"]}
+            for key, value in entry["sensor"].items():
+                if key in ("point", "center"):
+                    sensor[key] = (R @ np.asarray(value, float) + t).tolist()
+                elif key in ("normal", "direction", "axis"):
+                    sensor[key] = (R @ np.asarray(value, float)).tolist()
+                elif key != "kind":
+                    sensor[key] = value
+            contact = {"feature": entry["feature"], "contact": entry["contact"], "sensor": sensor,
+                       "point": (R @ point + t).tolist(), "rho": float(entry.get("rho", 0.0))}
+            if ctype.fixture_fixed:
+                contact["fixture"] = {"o": point.tolist()}
+            contacts.append(contact)
+    return {key: np.array(value) for key, value in touches.items()}, contacts
