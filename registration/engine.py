@@ -45,6 +45,8 @@ EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be ju
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
 SAME_POSE_ROTATION_RAD = 1e-4
+NEAR_KNOWN_RAD = 1e-3  # a refinement this close to a found solution is converging onto it
+NEAR_KNOWN_MM = 0.05
 SAME_POSE_TRANSLATION_MM = 1e-3
 RANK_TOLERANCE = 1e-7  # singular values below this fraction of the largest count as zero
 POINT_CONTACT = "P/F"
@@ -246,8 +248,12 @@ def _subset(group, keep):
     return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows)
 
 
-def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60):
-    """Minimise the (weighted) sum of squared rows from a pose; return R, t, residuals, Jacobian."""
+def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60, known=()):
+    """Minimise the (weighted) sum of squared rows from a pose; return R, t, residuals, Jacobian.
+
+    ``known`` poses (R, t): stop early once the iterate comes close to one of
+    them (it is falling into a basin already explored).
+    """
     r, J = problem.evaluate(rotation, translation)
     w = np.ones(len(r)) if weights is None else weights
     cost = float(np.sum(w * r * r))
@@ -276,6 +282,9 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
         lam = max(lam / 10.0, 1e-9)
         if small or tiny:
             break
+        for R_known, t_known in known:
+            if rotation_angle(rotation @ R_known.T) < NEAR_KNOWN_RAD and np.linalg.norm(translation - t_known) < NEAR_KNOWN_MM:
+                return R_known, t_known, r, J
     return rotation, translation, r, J
 
 
@@ -484,31 +493,42 @@ def outside_extent(problem, rotation, translation, tolerance=EXTENT_TOLERANCE_MM
     return bad
 
 
-def solve(problem, initial_pose=None):
-    """All distinct local solutions from the starts, best first (list of Solution)."""
+def solve(problem, initial_pose=None, batch=6):
+    """All distinct local solutions from the starts, best first (list of Solution).
+
+    Starts are refined ``batch`` at a time, best predicted first, until one
+    batch yields an admissible solution that passes the residual test.
+    """
     if initial_pose is not None:
         T = check_fixture2meas(initial_pose)
         starts = [(T[:3, :3], T[:3, 3])]
     else:
-        starts = initial_poses(problem)
-        starts = _best_starts(problem, starts)
+        starts = _best_starts(problem, initial_poses(problem))
     length = problem.scale()
     solutions = []
-    for R, t in starts:
-        R, t, r, J = levenberg_marquardt(problem, R, t)
-        candidate = Solution(R, t, r, J)
-        if any(_same_pose((R, t), (s.rotation, s.translation)) for s in solutions):
-            continue
-        candidate.rank = jacobian_rank(J, length)
-        candidate.passes = chi_square_passes(candidate.cost, len(r), candidate.rank, problem.sigma)
-        candidate.outside = outside_extent(problem, R, t)
-        candidate.admissible = not candidate.outside
-        solutions.append(candidate)
+    # The first batch holds every local minimum of the sweep: all solutions are looked for.
+    bounds = [0, max(getattr(problem, "sweep_minima", batch), 1)]
+    while bounds[-1] < len(starts):
+        bounds.append(bounds[-1] + batch)
+    for first, last in zip(bounds[:-1], bounds[1:]):
+        for R, t in starts[first:last]:
+            known = [(s.rotation, s.translation) for s in solutions]
+            R, t, r, J = levenberg_marquardt(problem, R, t, known=known)
+            if any(_same_pose((R, t), pose) for pose in known):
+                continue
+            candidate = Solution(R, t, r, J)
+            candidate.rank = jacobian_rank(J, length)
+            candidate.passes = chi_square_passes(candidate.cost, len(r), candidate.rank, problem.sigma)
+            candidate.outside = outside_extent(problem, R, t)
+            candidate.admissible = not candidate.outside
+            solutions.append(candidate)
+        if any(s.passes and s.admissible for s in solutions):
+            break
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
     return solutions
 
 
-def _best_starts(problem, starts, keep=6):
+def _best_starts(problem, starts):
     """Solve each start's translation (batched Gauss-Newton), keep the best local minima.
 
     Starts come in sweeps of ``SWEEP_STEPS`` angles; a start is kept when its
@@ -535,7 +555,9 @@ def _best_starts(problem, starts, keep=6):
         chosen = [k for k in order if minima.reshape(-1)[k]]
     else:
         chosen = list(order)
-    return [(Rs[k], ts[k]) for k in chosen[:keep]]
+    problem.sweep_minima = len(chosen)
+    chosen += [k for k in order if k not in set(chosen)]
+    return [(Rs[k], ts[k]) for k in chosen]
 
 
 def covariance(jacobian, translation, sigma):

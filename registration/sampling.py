@@ -1,0 +1,136 @@
+"""Synthetic touches on the fixture's STL: the test bench of the registration routine.
+
+Touches are sampled on the mesh triangles that belong to each sensing
+feature (so they carry the tessellation's chordal error), moved by a random
+pose, and perturbed by Gaussian noise. Line and point features and non-point
+sensors are placed analytically. trimesh is imported here only, never by the
+engine.
+"""
+
+import numpy as np
+
+from .engine import plan_touches
+from .features import feature_from_json
+from .pose import fixture2meas_from_rt, random_rotation
+
+VERTEX_ON_SURFACE_MM = 1e-3  # a feature's triangles have all three vertices this close to it
+NORMAL_AGREEMENT = 0.9  # cosine between a triangle normal and the feature normal at its centroid
+POSE_TRANSLATION_RANGE_MM = 100.0  # random poses: translation uniform in +- this per axis
+
+
+def load_mesh(path):
+    import trimesh
+
+    return trimesh.load_mesh(str(path), process=False)
+
+
+def plan_entries(document, plan="default"):
+    """Touch-plan entries of a features.json document: the default plan or a named one."""
+    plans = document.get("plans") or {}
+    if plan in plans:
+        entry = plans[plan]
+        return entry["touch_plan"] if isinstance(entry, dict) else entry
+    if plan == "default" and "touch_plan" in document:
+        return document["touch_plan"]
+    names = sorted(set(plans) | ({"default"} if "touch_plan" in document else set()))
+    raise ValueError(f"unknown touch plan {plan!r}; choose from {', '.join(names)}")
+
+
+def feature_faces(mesh, feature):
+    """Indices of the mesh triangles lying on a surface feature (plane, sphere, cylinder)."""
+    triangles = mesh.triangles  # (m, 3, 3)
+    distance = np.abs(feature.signed_distance(triangles.reshape(-1, 3))).reshape(-1, 3)
+    on = np.all(distance < VERTEX_ON_SURFACE_MM, axis=1)
+    centroids = triangles.mean(axis=1)
+    agree = np.einsum("ij,ij->i", mesh.face_normals, feature.normal_at(centroids)) > NORMAL_AGREEMENT
+    inside = feature.contains(centroids, VERTEX_ON_SURFACE_MM)
+    return np.flatnonzero(on & agree & inside)
+
+
+def sample_on_feature(mesh, faces, feature, count, rng, attempts=20):
+    """Points (count, 3) uniform by area on a feature's triangles, inside its finite patch."""
+    kept = np.zeros((0, 3))
+    for _ in range(attempts):
+        points = sample_on_faces(mesh, faces, 4 * count, rng)
+        kept = np.vstack([kept, points[feature.contains(points, 0.0)]])
+        if len(kept) >= count:
+            return kept[:count]
+    raise ValueError(f"cannot sample touches inside the patch of feature {feature.id}")
+
+
+def sample_on_faces(mesh, faces, count, rng):
+    """Points (count, 3) drawn uniformly by area on the given triangles."""
+    triangles = mesh.triangles[faces]
+    area = mesh.area_faces[faces]
+    pick = rng.choice(len(faces), size=count, p=area / area.sum())
+    u, v = rng.random(count), rng.random(count)
+    flip = u + v > 1.0
+    u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+    a, b, c = triangles[pick, 0], triangles[pick, 1], triangles[pick, 2]
+    return a + u[:, None] * (b - a) + v[:, None] * (c - a)
+
+
+def closest_on_faces(mesh, faces, points):
+    """The closest points on the given triangles to ``points`` (n, 3)."""
+    from trimesh.triangles import closest_point
+
+    triangles = mesh.triangles[faces]
+    out = np.empty((len(points), 3))
+    for k, p in enumerate(np.asarray(points, float)):
+        candidates = closest_point(triangles, np.tile(p, (len(triangles), 1)))
+        out[k] = candidates[np.argmin(np.linalg.norm(candidates - p, axis=1))]
+    return out
+
+
+class TouchSampler:
+    """Draws noisy touches of a touch plan on the STL of a fixture."""
+
+    def __init__(self, document, mesh, plan="default", random_positions=False):
+        self.features = {entry["id"]: feature_from_json(entry) for entry in document["features"]}
+        self.entries = plan_entries(document, plan)
+        self.mesh = mesh
+        self.random_positions = random_positions
+        self.faces = {}
+        for entry in self.entries:
+            feature = self.features[entry["feature"]]
+            if "sensor" not in entry and feature.kind in ("plane", "sphere", "cylinder"):
+                faces = feature_faces(mesh, feature)
+                if not len(faces):
+                    raise ValueError(f"no STL triangles found on feature {feature.id}")
+                self.faces[feature.id] = faces
+        # Nominal touches snapped onto the mesh, once: the default plan's positions.
+        self.snapped = []
+        for entry in self.entries:
+            points = np.asarray(entry["points"], float).reshape(-1, 3)
+            if entry["feature"] in self.faces and "sensor" not in entry:
+                points = closest_on_faces(mesh, self.faces[entry["feature"]], points)
+            self.snapped.append(points)
+
+    def fixture_entries(self, rng):
+        """Plan entries with their points on the mesh (nominal or random), fixture frame."""
+        out = []
+        for entry, snapped in zip(self.entries, self.snapped):
+            points = snapped
+            feature = self.features[entry["feature"]]
+            if self.random_positions and "sensor" not in entry:
+                if feature.id in self.faces:
+                    points = sample_on_feature(self.mesh, self.faces[feature.id], feature, len(points), rng)
+                elif feature.kind == "line" and feature.extent.interval is not None:
+                    s = rng.uniform(*feature.extent.interval, size=len(points))
+                    points = feature.point + s[:, None] * feature.direction
+            out.append({**entry, "points": np.asarray(points).tolist()})
+        return out
+
+    def draw(self, rng, noise_mm, fixture2meas=None):
+        """(touches by feature, contacts, true fixture2meas) with Gaussian noise of ``noise_mm``."""
+        if fixture2meas is None:
+            fixture2meas = fixture2meas_from_rt(
+                random_rotation(rng), rng.uniform(-POSE_TRANSLATION_RANGE_MM, POSE_TRANSLATION_RANGE_MM, 3)
+            )
+        touches, contacts = plan_touches(self.fixture_entries(rng), fixture2meas)
+        touches = {key: value + rng.normal(scale=noise_mm, size=value.shape) for key, value in touches.items()}
+        for contact in contacts:
+            sensor = contact["sensor"]
+            if "point" in sensor:
+                sensor["point"] = (np.asarray(sensor["point"]) + rng.normal(scale=noise_mm, size=3)).tolist()
+        return touches, contacts, fixture2meas
