@@ -45,6 +45,9 @@ EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be ju
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
 SAME_POSE_ROTATION_RAD = 1e-4
+STALLED_AFTER = 4  # LM iterations before a refinement may be abandoned as stalled ...
+STALLED_COST_FACTOR = 1e4  # ... while its cost exceeds this many times sigma^2 per row ...
+STALLED_DECREASE = 0.5  # ... and one iteration removes less than half of it
 NEAR_KNOWN_RAD = 1e-3  # a refinement this close to a found solution is converging onto it
 NEAR_KNOWN_MM = 0.05
 SAME_POSE_TRANSLATION_MM = 1e-3
@@ -257,8 +260,9 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
     r, J = problem.evaluate(rotation, translation)
     w = np.ones(len(r)) if weights is None else weights
     cost = float(np.sum(w * r * r))
+    hopeless = STALLED_COST_FACTOR * problem.sigma**2 * max(len(r), 1)
     lam = 1e-4
-    for _ in range(max_iterations):
+    for iteration in range(max_iterations):
         Jw = J * w[:, None]
         A = J.T @ Jw
         g = Jw.T @ r
@@ -278,9 +282,10 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
             break
         small = np.linalg.norm(step[:3]) < 1e-13 and np.linalg.norm(step[3:]) < 1e-11
         tiny = cost - cost2 <= 1e-16 * max(cost, 1e-30) + 1e-30
+        stalled = iteration >= STALLED_AFTER and cost2 > hopeless and cost2 > STALLED_DECREASE * cost
         rotation, translation, r, J, cost = R2, t2, r2, J2, cost2
         lam = max(lam / 10.0, 1e-9)
-        if small or tiny:
+        if small or tiny or stalled:
             break
         for R_known, t_known in known:
             if rotation_angle(rotation @ R_known.T) < NEAR_KNOWN_RAD and np.linalg.norm(translation - t_known) < NEAR_KNOWN_MM:
