@@ -1,0 +1,100 @@
+"""Cylinder whose end is cut by an inclined plane (the paper's Example Two, Figs. 9-10).
+
+Fixture frame as in the paper: origin o where the cylinder axis meets the
+plane, Z = s along the axis (pointing out through the inclined face),
+Y = n x s, X = Y x Z, so the plane's outward normal is
+n = (-cos a, 0, sin a) for an inclination a between plane and axis.
+
+The cylinder face runs from the bottom face z = -(R cot a + length) up to the
+inclined face; the inclined face is an ellipse. Touches (class
+{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}): three P/F-PL/M on ``plane``, three
+P/F-C/M on ``cylinder``, plus a fourth cylinder touch that removes the finite
+set of solutions (Section V-B). At a = 90 deg the plane cannot fix the
+rotation about the axis, and near 0 deg the face runs off to infinity: the
+angle is limited to 10..80 deg. The base hangs from the flat bottom face.
+"""
+
+import math
+
+import numpy as np
+
+from fixturecad.registration.features import Cylinder, Extent, Plane
+from fixturecad.templates.base import Anchor, Param, Plan, Template, halfspace, touch
+
+
+class InclinedPlaneCylinder(Template):
+    name = "inclined-plane-cylinder"
+    title = "cylinder with its end cut by a plane inclined to the axis"
+    origin = "paper Example Two, Figs. 9-10"
+    PARAMS = (
+        Param("radius", "mm", 20.0, 2.0, 200.0, "radius of the cylinder", "r"),
+        Param("angle", "deg", 45.0, 10.0, 80.0,
+              "inclination between plane and axis (0 and 90 cannot fix the rotation about the axis)", "a"),
+        Param("length", "mm", 40.0, 2.0, 1000.0, "cylinder length below the lowest point of the inclined face", "l"),
+    )
+    contact_class = "{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}"
+
+    @property
+    def normal(self) -> np.ndarray:
+        a = math.radians(self.angle)
+        return np.array([-math.cos(a), 0.0, math.sin(a)])
+
+    @property
+    def rise(self) -> float:
+        """Half the axial extent of the inclined face: R cot a."""
+        return self.radius / math.tan(math.radians(self.angle))
+
+    @property
+    def bottom(self) -> float:
+        return -(self.rise + self.length)
+
+    def body(self):
+        import cadquery as cq
+
+        r, top = self.radius, self.rise + 1.0
+        cylinder = cq.Solid.makeCylinder(r, top - self.bottom, cq.Vector(0, 0, self.bottom))
+        size = 4 * (r + top - self.bottom)
+        n = cq.Vector(*self.normal)
+        # a big box on the outer side of the plane, removed
+        cutter = cq.Workplane(cq.Plane(origin=(0, 0, 0), xDir=(0, 1, 0), normal=n)).rect(size, size).extrude(size).val()
+        return cylinder.cut(cutter).clean().Solids()[0]
+
+    def body_volume(self) -> float:
+        # the plane passes through the axis: the wedge above z = 0 equals the one below
+        return math.pi * self.radius**2 * (self.rise + self.length)
+
+    def anchor(self) -> Anchor:
+        r = self.radius
+        return Anchor(np.array([0.0, 0.0, self.bottom]), np.array([0.0, 0.0, -1.0]), 0.5 * r, r, 2.5 * r, 0.3 * r)
+
+    def features(self) -> list:
+        r = self.radius
+        return [
+            Plane("plane", [0, 0, 0], self.normal, Extent(cylinders=[[0, 0, 0, 0, 0, 1, r]])),
+            Cylinder("cylinder", [0, 0, 0], [0, 0, 1], r,
+                     Extent(halfspaces=[halfspace(self.normal, 0.0)], interval=(self.bottom, self.rise))),
+        ]
+
+    def _on_plane(self, xy) -> np.ndarray:
+        xy = np.atleast_2d(xy)
+        z = xy[:, 0] / math.tan(math.radians(self.angle))  # n . p = 0
+        return np.column_stack([xy, z])
+
+    def _on_cylinder(self, azimuth_deg, depth_fraction) -> np.ndarray:
+        phi = np.radians(azimuth_deg)
+        z = -self.rise - np.asarray(depth_fraction) * self.length
+        return np.column_stack([self.radius * np.cos(phi), self.radius * np.sin(phi), z])
+
+    def touch_plans(self) -> dict:
+        r = self.radius
+        angles = np.radians([90.0, 210.0, 330.0])
+        plane_points = self._on_plane(0.6 * r * np.column_stack([np.cos(angles), np.sin(angles)]))
+        cylinder_points = self._on_cylinder([20.0, 140.0, 260.0, 200.0], [0.3, 0.6, 0.4, 0.8])
+        plan = [
+            touch("P/F-PL/M", "plane", plane_points),
+            touch("P/F-C/M", "cylinder", cylinder_points),
+        ]
+        return {
+            "default": Plan(self.contact_class, plan,
+                            "3 plane + 3 cylinder touches, and a 4th cylinder touch for a unique solution"),
+        }
