@@ -44,6 +44,7 @@ CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 100
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
+UNSWEPT_PER_BLOCK = 6  # fallback starts per candidate centre refined before stopping at a solution
 SAME_POSE_ROTATION_RAD = 1e-4
 STALLED_AFTER = 4  # LM iterations before a refinement may be abandoned as stalled ...
 STALLED_COST_FACTOR = 1e4  # ... while its cost exceeds this many times sigma^2 per row ...
@@ -354,7 +355,12 @@ def _anchor(feature):
 
 
 def initial_poses(problem):
-    """Candidate starting poses (R, t) without a nominal pose: closed forms, then sweeps."""
+    """Candidate starting poses (R, t) without a nominal pose: closed forms, then sweeps.
+
+    Returns (starts, blocks, swept): the starts come in ``blocks`` equal
+    blocks (one per candidate sphere centre); ``swept`` when each block is
+    made of sweeps of ``SWEEP_STEPS`` rotations about a measured direction.
+    """
     point_groups = [g for g in problem.groups if g.points is not None]
     centres = _sphere_centre_candidates(point_groups)
     rotations = []
@@ -374,7 +380,7 @@ def initial_poses(problem):
             if R is not None:
                 starts.append((R, t))
         if starts:
-            return starts
+            return starts, len(starts), False
     if len(centres) >= 2 and not rotations:
         # The line through two sphere centres fixes a direction: sweep about it.
         (f1, m1), (f2, m2) = centres[:2]
@@ -384,6 +390,7 @@ def initial_poses(problem):
                 R0 = rotation_aligning(f2 - f1, axis)
                 for k in range(SWEEP_STEPS):
                     rotations.append(rotation_from_vector(2.0 * np.pi * k / SWEEP_STEPS * axis) @ R0)
+    swept = bool(rotations)
     if not rotations:
         rng = np.random.default_rng(0)
         rotations = [random_rotation(rng) for _ in range(FALLBACK_STARTS)]
@@ -392,15 +399,11 @@ def initial_poses(problem):
         anchors = np.concatenate([np.tile(_anchor(g.feature), (g.count, 1)) for g in point_groups]).mean(axis=0)
     else:
         measured = anchors = np.zeros(3)
-    starts = []
-    for R in rotations:
-        if centres:
-            # Translation in closed form from a sphere centre.
-            f, ms = centres[0]
-            starts.extend((R, m - R @ f) for m in ms[:1])
-        else:
-            starts.append((R, measured - R @ anchors))
-    return starts
+    if centres:
+        # Translation in closed form from each candidate centre of a sphere.
+        f, ms = centres[0]
+        return [(R, m - R @ f) for m in ms for R in rotations], len(ms), swept
+    return [(R, measured - R @ anchors) for R in rotations], 1, swept
 
 
 def _sphere_centre_candidates(point_groups):
@@ -508,11 +511,11 @@ def solve(problem, initial_pose=None, batch=6):
         T = check_fixture2meas(initial_pose)
         starts = [(T[:3, :3], T[:3, 3])]
     else:
-        starts = _best_starts(problem, initial_poses(problem))
+        starts, first_batch = _best_starts(problem, *initial_poses(problem))
     length = problem.scale()
     solutions = []
     # The first batch holds every local minimum of the sweep: all solutions are looked for.
-    bounds = [0, max(getattr(problem, "sweep_minima", batch), 1)]
+    bounds = [0, max(first_batch, 1)]
     while bounds[-1] < len(starts):
         bounds.append(bounds[-1] + batch)
     for first, last in zip(bounds[:-1], bounds[1:]):
@@ -521,26 +524,47 @@ def solve(problem, initial_pose=None, batch=6):
             R, t, r, J = levenberg_marquardt(problem, R, t, known=known)
             if any(_same_pose((R, t), pose) for pose in known):
                 continue
-            candidate = Solution(R, t, r, J)
-            candidate.rank = jacobian_rank(J, length)
-            candidate.passes = chi_square_passes(candidate.cost, len(r), candidate.rank, problem.sigma)
-            candidate.outside = outside_extent(problem, R, t)
-            candidate.admissible = not candidate.outside
-            solutions.append(candidate)
+            solutions.append(_judged(problem, Solution(R, t, r, J), length))
         if any(s.passes and s.admissible for s in solutions):
             break
+    # Closed-form alternatives: a sphere touched three times has two candidate
+    # centres; re-seed each solution with the other one.
+    point_groups = [g for g in problem.groups if g.points is not None]
+    for f, ms in _sphere_centre_candidates(point_groups):
+        if len(ms) < 2:
+            continue
+        for found in [s for s in solutions if s.passes and s.admissible]:
+            for m in ms:
+                R, t = found.rotation, m - found.rotation @ f
+                if np.linalg.norm(t - found.translation) < SAME_POSE_TRANSLATION_MM:
+                    continue
+                known = [(s.rotation, s.translation) for s in solutions]
+                R, t, r, J = levenberg_marquardt(problem, R, t, known=known)
+                if any(_same_pose((R, t), pose) for pose in known):
+                    continue
+                solutions.append(_judged(problem, Solution(R, t, r, J), length))
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
     return solutions
 
 
-def _best_starts(problem, starts):
-    """Solve each start's translation (batched Gauss-Newton), keep the best local minima.
+def _judged(problem, candidate, length):
+    """A solution with its rank, residual test and extent check filled in."""
+    candidate.rank = jacobian_rank(candidate.jacobian, length)
+    candidate.passes = chi_square_passes(candidate.cost, len(candidate.residuals), candidate.rank, problem.sigma)
+    candidate.outside = outside_extent(problem, candidate.rotation, candidate.translation)
+    candidate.admissible = not candidate.outside
+    return candidate
 
-    Starts come in sweeps of ``SWEEP_STEPS`` angles; a start is kept when its
-    cost is no higher than its two neighbours in the sweep.
+
+def _best_starts(problem, starts, blocks, swept):
+    """Solve each start's translation (batched Gauss-Newton) and order the starts.
+
+    Returns (starts, first): the ``first`` ones are those to refine in any
+    case: in sweeps, every start whose cost is no higher than its two
+    neighbours; otherwise the best few of each block. The rest follow by cost.
     """
     if not starts:
-        return []
+        return [], 0
     Rs = np.array([R for R, _ in starts])
     ts = np.array([t for _, t in starts], dtype=float)
     for _ in range(2):
@@ -553,16 +577,17 @@ def _best_starts(problem, starts):
     predicted = r + np.einsum("kmi,ki->km", Jv, v)
     cost = np.sum(predicted**2, axis=1)
     order = np.argsort(cost)
-    K = len(starts)
-    if K % SWEEP_STEPS == 0 and K > SWEEP_STEPS - 1:
+    if swept:
         sweep = cost.reshape(-1, SWEEP_STEPS)
         minima = (sweep <= np.roll(sweep, 1, axis=1)) & (sweep <= np.roll(sweep, -1, axis=1))
         chosen = [k for k in order if minima.reshape(-1)[k]]
     else:
-        chosen = list(order)
-    problem.sweep_minima = len(chosen)
-    chosen += [k for k in order if k not in set(chosen)]
-    return [(Rs[k], ts[k]) for k in chosen]
+        size = len(starts) // blocks
+        block = np.arange(len(starts)) // size
+        chosen = [k for k in order if np.sum(block[order[: list(order).index(k)]] == block[k]) < UNSWEPT_PER_BLOCK]
+    picked = set(chosen)
+    ordered = chosen + [k for k in order if k not in picked]
+    return [(Rs[k], ts[k]) for k in ordered], len(chosen)
 
 
 def covariance(jacobian, translation, sigma):
