@@ -252,11 +252,13 @@ def _subset(group, keep):
     return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows)
 
 
-def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60, known=()):
+def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60, known=(),
+                        may_give_up=True):
     """Minimise the (weighted) sum of squared rows from a pose; return R, t, residuals, Jacobian.
 
     ``known`` poses (R, t): stop early once the iterate comes close to one of
-    them (it is falling into a basin already explored).
+    them (it is falling into a basin already explored). ``may_give_up``:
+    stop when the cost stalls far above any acceptable residual.
     """
     r, J = problem.evaluate(rotation, translation)
     w = np.ones(len(r)) if weights is None else weights
@@ -283,7 +285,7 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
             break
         small = np.linalg.norm(step[:3]) < 1e-13 and np.linalg.norm(step[3:]) < 1e-11
         tiny = cost - cost2 <= 1e-16 * max(cost, 1e-30) + 1e-30
-        stalled = iteration >= STALLED_AFTER and cost2 > hopeless and cost2 > STALLED_DECREASE * cost
+        stalled = may_give_up and iteration >= STALLED_AFTER and cost2 > hopeless and cost2 > STALLED_DECREASE * cost
         rotation, translation, r, J, cost = R2, t2, r2, J2, cost2
         lam = max(lam / 10.0, 1e-9)
         if small or tiny or stalled:
@@ -509,9 +511,9 @@ def solve(problem, initial_pose=None, batch=6):
     """
     if initial_pose is not None:
         T = check_fixture2meas(initial_pose)
-        starts = [(T[:3, :3], T[:3, 3])]
+        starts, first_batch, swept = [(T[:3, :3], T[:3, 3])], 1, True
     else:
-        starts, first_batch = _best_starts(problem, *initial_poses(problem))
+        starts, first_batch, swept = _best_starts(problem, *initial_poses(problem))
     length = problem.scale()
     solutions = []
     # The first batch holds every local minimum of the sweep: all solutions are looked for.
@@ -521,7 +523,8 @@ def solve(problem, initial_pose=None, batch=6):
     for first, last in zip(bounds[:-1], bounds[1:]):
         for R, t in starts[first:last]:
             known = [(s.rotation, s.translation) for s in solutions]
-            R, t, r, J = levenberg_marquardt(problem, R, t, known=known)
+            # Far starts (no sweep) may take many slow steps: never abandon them.
+            R, t, r, J = levenberg_marquardt(problem, R, t, known=known, may_give_up=swept)
             if any(_same_pose((R, t), pose) for pose in known):
                 continue
             solutions.append(_judged(problem, Solution(R, t, r, J), length))
@@ -564,7 +567,7 @@ def _best_starts(problem, starts, blocks, swept):
     neighbours; otherwise the best few of each block. The rest follow by cost.
     """
     if not starts:
-        return [], 0
+        return [], 0, swept
     Rs = np.array([R for R, _ in starts])
     ts = np.array([t for _, t in starts], dtype=float)
     for _ in range(2):
@@ -587,7 +590,7 @@ def _best_starts(problem, starts, blocks, swept):
         chosen = [k for k in order if np.sum(block[order[: list(order).index(k)]] == block[k]) < UNSWEPT_PER_BLOCK]
     picked = set(chosen)
     ordered = chosen + [k for k in order if k not in picked]
-    return [(Rs[k], ts[k]) for k in ordered], len(chosen)
+    return [(Rs[k], ts[k]) for k in ordered], len(chosen), swept
 
 
 def covariance(jacobian, translation, sigma):
@@ -618,9 +621,10 @@ def sigmas(cov):
 
 
 def robust_flag(problem, solution):
-    """A touch whose removal makes the residual pass, found by a Cauchy-weighted refit.
+    """A touch whose removal makes the touches consistent, found by a Cauchy-weighted refit.
 
-    Returns (touch index, refit Solution) or None.
+    The robust (Cauchy) fit ranks the touches by residual; the worst are left
+    out in turn. Returns (touch index, refit Solution, its residual mm) or None.
     """
     sigma = problem.sigma
     R, t = solution.rotation, solution.translation
@@ -632,16 +636,14 @@ def robust_flag(problem, solution):
     per_touch = {}
     for touch, value in zip(problem.row_touch, r):
         per_touch[int(touch)] = per_touch.get(int(touch), 0.0) + float(value) ** 2
-    length = problem.scale()
-    for touch in sorted(per_touch, key=lambda k: -per_touch[k])[:3]:
+    # Leave out the worst touches in turn and solve again from scratch.
+    for touch in sorted(per_touch, key=lambda k: -per_touch[k]):
         reduced = problem.without(touch)
-        R2, t2, r2, J2 = levenberg_marquardt(reduced, R, t)
-        rank = jacobian_rank(J2, length)
-        if rank == 6 and len(r2) > 6 and chi_square_passes(float(r2 @ r2), len(r2), rank, sigma):
-            refit = Solution(R2, t2, r2, J2, rank)
-            refit.outside = outside_extent(reduced, R2, t2)
-            refit.admissible = not refit.outside
-            return touch, refit, float(np.sqrt(per_touch[touch]))
+        if reduced.size <= 6:
+            continue
+        good = [s for s in solve(reduced) if s.passes and s.admissible and s.rank == 6]
+        if good:
+            return touch, good[0], float(np.sqrt(per_touch[touch]))
     return None
 
 
@@ -701,41 +703,55 @@ def free_motions(problem, solution):
         else:
             names.append("translation in every direction")
     if rot.shape[1]:
-        omegas = rot[:3]
-        basis = np.linalg.qr(omegas)[0]
-        remaining = basis
-        for name, d, f in directions:
-            if remaining.shape[1] == 0:
-                break
-            proj = remaining @ (remaining.T @ d)
-            if np.linalg.norm(proj - d) < 1e-6:
-                names.append("rotation about " + name)
-                remaining = remaining - np.outer(d, d @ remaining)
-                q, sv, _ = np.linalg.svd(remaining, full_matrices=False)
-                remaining = q[:, sv > 1e-6]
-        for k in range(remaining.shape[1]):
-            w = remaining[:, k]
-            # The full null twist with this rotation part: v from least squares in the null space.
+        omega_basis = np.linalg.qr(rot[:3])[0]
+        shifts = trans[3:] if trans.shape[1] else np.zeros((3, 0))
+
+        def twist_with(w):
+            """The free twist whose rotation part is ``w`` and the axis point (m, 3)."""
             coeff = np.linalg.lstsq(null[:3], w, rcond=None)[0]
             v = null[3:] @ coeff
-            point = np.cross(w, v) / (w @ w)
+            return np.cross(w, v) / (w @ w)
+
+        def on_axis(points, w):
+            """Whether the points lie on the free axis along w (shifted by free translations)."""
+            off = points - twist_with(w)
+            off = off - np.outer(off @ w, w)
+            moves = np.cross(w, shifts.T).T if shifts.shape[1] else np.zeros((3, 0))
+            if moves.shape[1]:
+                q = np.linalg.qr(moves)[0]
+                off = off - (off @ q) @ q.T
+            return bool(np.all(np.linalg.norm(off, axis=1) < 1e-6 * length))
+
+        def take(w):
+            nonlocal omega_basis
+            if omega_basis.shape[1] == 0 or np.linalg.norm(omega_basis @ (omega_basis.T @ w) - w) > 1e-6:
+                return False
+            rest = omega_basis - np.outer(w, w @ omega_basis)
+            q, sv, _ = np.linalg.svd(rest, full_matrices=False)
+            omega_basis = q[:, sv > 1e-6]
+            return True
+
+        # Axes through collinear touches, then feature directions, then anything left.
+        for g in problem.groups:
+            if g.points is None or g.count < 2:
+                continue
+            d = g.points[-1] - g.points[0]
+            d = d / np.linalg.norm(d)
+            if on_axis(g.points, d) and take(d):
+                names.append(f"rotation about the line through the touches on {g.feature.id}")
+        for name, d, f in directions:
+            if take(d):
+                names.append("rotation about " + name)
+        for k in range(omega_basis.shape[1]):
+            w = omega_basis[:, k]
             label = None
             for g in problem.groups:
-                if g.points is not None and g.count >= 2:
-                    off = g.points - point
-                    dist = np.linalg.norm(off - np.outer(off @ w, w), axis=1)
-                    if np.all(dist < 1e-3 * length):
-                        label = f"the line through the touches on {g.feature.id}"
+                if getattr(g.feature, "kind", None) == "sphere":
+                    c = R @ g.feature.center + t
+                    if on_axis(c[None], w):
+                        label = f"an axis {_vec(w)} through the centre of {g.feature.id}"
                         break
-            if label is None:
-                for g in problem.groups:
-                    if g.feature.kind == "sphere":
-                        c = R @ g.feature.center + t
-                        off = c - point
-                        if np.linalg.norm(off - (off @ w) * w) < 1e-3 * length:
-                            label = f"an axis {_vec(w)} through the centre of {g.feature.id}"
-                            break
-            names.append("rotation about " + (label or f"the axis {_vec(w)} through {_vec(point)} mm"))
+            names.append("rotation about " + (label or f"the axis {_vec(w)} through {_vec(twist_with(w))} mm"))
     return names
 
 

@@ -32,16 +32,16 @@ def rotation_from_vector(omega):
 def vector_from_rotation(rotation):
     """The rotation vector (3,) rad of a rotation matrix (inverse of ``rotation_from_vector``)."""
     R = np.asarray(rotation, dtype=np.float64)
-    cos = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    angle = float(np.arccos(cos))
+    angle = rotation_angle(R)
     axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
     if angle < 1e-8:
         return 0.5 * axis
-    if np.pi - angle < 1e-4:
-        # Near a half turn: the axis is the dominant column of R + I.
-        B = 0.5 * (R + np.eye(3))
-        k = int(np.argmax(np.diag(B)))
-        u = B[:, k] / np.sqrt(max(B[k, k], 1e-300))
+    if np.pi - angle < 1e-3:
+        # Near a half turn: u u^T from the symmetric part, the sign from the skew part.
+        cos = np.cos(angle)
+        outer = (0.5 * (R + R.T) - cos * np.eye(3)) / (1.0 - cos)
+        k = int(np.argmax(np.diag(outer)))
+        u = outer[:, k] / np.sqrt(outer[k, k])
         if axis @ u < 0:
             u = -u
         return angle * u / np.linalg.norm(u)

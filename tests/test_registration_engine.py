@@ -1,0 +1,305 @@
+"""Registration engine: exact recovery, rank per contact, the Cramer-Rao bound, statuses."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fixturecad.registration import engine
+from fixturecad.registration.contacts import ContactType
+from fixturecad.registration.features import Plane, Sphere
+from fixturecad.registration.pose import (
+    apply_twist,
+    check_fixture2meas,
+    fixture2meas_from_rt,
+    pose_errors,
+    random_rotation,
+    rotation_from_vector,
+    vector_from_rotation,
+)
+
+templates = pytest.importorskip("fixturecad.templates")
+
+PLANS = [(name, plan) for name, cls in sorted(templates.TEMPLATES.items()) for plan in sorted(cls().touch_plans())]
+# Plans whose touches are all point-probe touches: their noise model is the bound's.
+POINT_PLANS = [
+    (name, plan) for name, plan in PLANS
+    if all("sensor" not in e for e in templates.TEMPLATES[name]().touch_plans()[plan].touches)
+]
+
+
+def _plan(name, plan):
+    template = templates.TEMPLATES[name]()
+    return template.feature_map(), template.touch_plans()[plan].touches
+
+
+def _random_pose(rng):
+    return fixture2meas_from_rt(random_rotation(rng), rng.uniform(-100.0, 100.0, 3))
+
+
+def _solution_errors(result, truth):
+    return [pose_errors(np.array(s["pose"]), truth) for s in result["solutions"]]
+
+
+# ------------------------------------------------------------------ poses
+
+
+def test_rotation_vector_round_trips_including_half_turns():
+    rng = np.random.default_rng(1)
+    for angle in (1e-12, 0.3, 2.0, np.pi - 1e-7, np.pi):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R = rotation_from_vector(angle * axis)
+        back = rotation_from_vector(vector_from_rotation(R))
+        assert np.abs(back - R).max() < 1e-9
+
+
+def test_fixture2meas_is_checked():
+    with pytest.raises(ValueError, match=r"shape \(3, 3\)"):
+        check_fixture2meas(np.eye(3))
+    bad = np.eye(4)
+    bad[0, 0] = 2.0
+    with pytest.raises(ValueError, match="rigid"):
+        check_fixture2meas(bad)
+
+
+# ------------------------------------------------------------------ contact rows
+
+
+def _all_contacts():
+    from fixturecad.theory.catalogue import catalogue
+
+    return [(entry.ctype, entry.dim) for entry in catalogue()]
+
+
+@pytest.mark.parametrize("swap", [False, True])
+def test_every_contact_stacks_six_minus_d_independent_rows(swap):
+    """All 41 contacts of Table I, both ways round, through the engine's stacked Jacobian."""
+    from fixturecad.theory.instances import generic_instance
+
+    rng = np.random.default_rng(7)
+    contacts = _all_contacts()
+    assert len(contacts) == 41
+    for ctype, dim in contacts:
+        ctype = ctype.swapped() if swap else ctype
+        instance = generic_instance(ctype, rng)
+        truth = _random_pose(rng)
+        R, t = truth[:3, :3], truth[:3, 3]
+        # The instance sits in the measurement frame; its fixture side goes back to the fixture frame.
+        fixture = instance.fixture.moved(R.T, -R.T @ t)
+        group = engine.TouchGroup(None, ctype, instance.sensor, fixture, np.array([instance.rho]), np.array([0]))
+        values, jacobian = engine.Problem([group]).evaluate(R, t)
+        assert np.abs(values).max() < 1e-8, ctype.name
+        assert len(values) == 6 - dim, ctype.name
+        assert engine.jacobian_rank(jacobian, 50.0) == 6 - dim, ctype.name
+
+
+# ------------------------------------------------------------------ exact recovery
+
+
+@pytest.mark.parametrize("name,plan", PLANS)
+def test_noise_free_touches_on_the_analytic_surfaces_give_the_pose(name, plan):
+    features, entries = _plan(name, plan)
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        truth = _random_pose(rng)
+        touches, contacts = engine.plan_touches(entries, truth)
+        result = engine.register_touches(features, touches, contacts=contacts)
+        assert result["status"] in ("unique", "ambiguous"), result["status"]
+        errors = _solution_errors(result, truth)
+        assert min(max(e) for e in errors) < 1e-6
+        if result["status"] == "unique":
+            dt, dr = pose_errors(np.array(result["pose"]), truth)
+            assert dt < 1e-6 and dr < 1e-6
+        # From a nominal pose 5 degrees and 5 mm off, the same answer.
+        twist = np.concatenate([np.radians(5.0) * np.array([0.6, 0.0, 0.8]), [3.0, 4.0, 0.0]])
+        nominal = fixture2meas_from_rt(*apply_twist(truth[:3, :3], truth[:3, 3], twist))
+        result = engine.register_touches(features, touches, nominal, contacts=contacts)
+        dt, dr = pose_errors(np.array(result["pose"]), truth)
+        assert dt < 1e-6 and dr < 1e-6
+
+
+def test_ball_tip_touches_are_ball_centres():
+    features, entries = _plan("quarter-sphere", "point-probe")
+    rng = np.random.default_rng(4)
+    truth = _random_pose(rng)
+    radius = 1.5
+    touches = {}
+    for entry in entries:
+        feature = features[entry["feature"]]
+        points = np.asarray(entry["points"], float)
+        centres = points + radius * feature.normal_at(points)
+        touches[feature.id] = centres @ truth[:3, :3].T + truth[:3, 3]
+    result = engine.register_touches(features, touches, ball_radius_mm=radius)
+    assert result["status"] == "unique"
+    dt, dr = pose_errors(np.array(result["pose"]), truth)
+    assert dt < 1e-6 and dr < 1e-6
+
+
+# ------------------------------------------------------------------ Cramer-Rao bound
+
+
+@pytest.mark.parametrize("name,plan", POINT_PLANS)
+def test_errors_match_the_cramer_rao_bound(name, plan):
+    """500 trials at sigma = 5 um: RMS errors within 10 % of the bound, all successful."""
+    features, entries = _plan(name, plan)
+    rng = np.random.default_rng(2024)
+    sigma, trials = 0.005, 500
+    err_t, err_r, bound_t, bound_r = [], [], [], []
+    for _ in range(trials):
+        truth = _random_pose(rng)
+        touches, _ = engine.plan_touches(entries, truth)
+        noisy = {k: v + rng.normal(scale=sigma, size=v.shape) for k, v in touches.items()}
+        nominal = fixture2meas_from_rt(
+            *apply_twist(truth[:3, :3], truth[:3, 3], rng.normal(scale=[0.01] * 3 + [0.5] * 3))
+        )
+        result = engine.register_touches(features, noisy, nominal, sigma_mm=sigma)
+        assert result["status"] == "unique"
+        dt, dr = pose_errors(np.array(result["pose"]), truth)
+        err_t.append(dt)
+        err_r.append(dr)
+        problem = engine.Problem(engine.build_groups(features, noisy), sigma)
+        bound = engine.cramer_rao_bound(problem, truth, sigma)
+        bound_t.append(np.trace(bound[3:, 3:]))
+        bound_r.append(np.trace(bound[:3, :3]))
+    ratio_t = np.sqrt(np.mean(np.square(err_t)) / np.mean(bound_t))
+    ratio_r = np.sqrt(np.mean(np.square(err_r)) / np.mean(bound_r))
+    assert abs(ratio_t - 1.0) < 0.10, ratio_t
+    assert abs(ratio_r - 1.0) < 0.10, ratio_r
+
+
+def test_covariance_at_the_truth_is_the_bound():
+    features, entries = _plan("cube", "default")
+    truth = _random_pose(np.random.default_rng(8))
+    touches, _ = engine.plan_touches(entries, truth)
+    result = engine.register_touches(features, touches, sigma_mm=0.005)
+    bound = engine.cramer_rao_bound(engine.Problem(engine.build_groups(features, touches)), truth, 0.005)
+    assert np.allclose(np.array(result["covariance"]), bound, rtol=1e-6, atol=1e-14)
+    assert result["sigma_translation_mm"] == pytest.approx(np.sqrt(np.trace(bound[3:, 3:])))
+
+
+# ------------------------------------------------------------------ statuses
+
+
+def _ball_block():
+    """A ball on a block: front and side faces with finite patches."""
+    def hs(normal, offset):
+        return {"normal": normal, "offset": offset}
+
+    return {f.id: f for f in [
+        Sphere("ball", [0, 0, 30], 10),
+        Plane("front", [0, 0, 0], [0, -1, 0],
+              extent={"halfspaces": [hs([1, 0, 0], 60), hs([-1, 0, 0], 50), hs([0, 0, -1], 0), hs([0, 0, 1], 60)]}),
+        Plane("side", [-50, 0, 0], [-1, 0, 0],
+              extent={"halfspaces": [hs([0, 1, 0], 60), hs([0, -1, 0], 0), hs([0, 0, -1], 0), hs([0, 0, 1], 60)]}),
+    ]}
+
+
+def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
+    features = _ball_block()
+    angles = np.radians([20.0, 140.0, 260.0])
+    ring = np.sqrt(100.0 - 9.0)
+    plan = {
+        "ball": np.c_[ring * np.cos(angles), ring * np.sin(angles), np.full(3, 33.0)],
+        "front": np.array([[10.0, 0, 15], [-30, 0, 50]]),
+        "side": np.array([[-50.0, 20, 10]]),
+    }
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        truth = _random_pose(rng)
+        touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in plan.items()}
+        result = engine.register_touches(features, touches)
+        assert result["status"] == "ambiguous"
+        errors = sorted(_solution_errors(result, truth))
+        # The true pose and its mirror: the ball centre reflected through the touches' plane.
+        assert len(errors) == 2
+        assert max(errors[0]) < 1e-6
+        assert errors[1][0] == pytest.approx(6.0, abs=1e-6) and errors[1][1] < 1e-6
+        extra = result["separating_touch"]
+        assert extra["separation_mm"] > 1.0
+        # Touching where it says separates them.
+        point = truth[:3, :3] @ np.array(extra["point_fixture_mm"]) + truth[:3, 3]
+        more = {k: v.copy() for k, v in touches.items()}
+        more[extra["feature"]] = np.vstack([more[extra["feature"]], point])
+        result = engine.register_touches(features, more)
+        assert result["status"] == "unique"
+        assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
+
+
+def test_three_collinear_touches_on_a_plane_are_underdetermined():
+    features, _ = _plan("cube", "default")
+    truth = _random_pose(np.random.default_rng(5))
+    top = features["top"]
+    from fixturecad.registration.contacts import perpendicular_basis
+
+    e1, _ = perpendicular_basis(top.normal)
+    line = top.point + np.outer([-5.0, 0.0, 5.0], e1)
+    result = engine.register_touches(features, {"top": line @ truth[:3, :3].T + truth[:3, 3]})
+    assert result["status"] == "underdetermined"
+    assert result["covariance"] is None
+    motions = result["free_motions"]
+    assert "translation in the plane of top" in motions
+    assert "rotation about the normal of top" in motions
+    assert "rotation about the line through the touches on top" in motions
+    assert len(motions) == 3
+
+
+def test_collinear_touches_in_a_full_plan_name_the_missing_rotation():
+    features, entries = _plan("cube", "default")
+    truth = _random_pose(np.random.default_rng(6))
+    touches, _ = engine.plan_touches(entries, truth)
+    top = touches["top"]
+    top[2] = 0.5 * (top[0] + top[1])  # the third touch on the line of the first two
+    result = engine.register_touches(features, touches)
+    assert result["status"] == "underdetermined"
+    assert result["rank"] == 5
+    # The rotation that tilts top about the touch line, with front and left still touching.
+    assert len(result["free_motions"]) == 1
+    assert result["free_motions"][0].startswith("rotation about ")
+
+
+def test_a_touch_labelled_with_the_wrong_feature_is_flagged():
+    features, _ = _plan("cube", "default")
+    rng = np.random.default_rng(9)
+    truth = _random_pose(rng)
+    local = {}
+    for fid, feature in features.items():
+        samples = engine._patch_samples(feature, count=50, seed=1)
+        local[fid] = samples[:4]
+    touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in local.items()}
+    touches = {k: v + rng.normal(scale=0.002, size=v.shape) for k, v in touches.items()}
+    # Move the last touch on "front" to "left": labelled front, it was taken on left.
+    wrong = local["left"][0] + np.array([0.0, 0.0, 0.0])
+    touches["front"][3] = truth[:3, :3] @ wrong + truth[:3, 3]
+    result = engine.register_touches(features, touches)
+    assert result["status"] == "inconsistent"
+    assert [(f["feature"], f["touch"]) for f in result["flagged"]] == [("front", 7)]
+    dt, dr = pose_errors(np.array(result["pose"]), truth)
+    assert dt < 0.05 and dr < 1e-3
+
+
+def test_no_touches_is_refused():
+    features, _ = _plan("cube", "default")
+    with pytest.raises(ValueError, match="no touches"):
+        engine.register_touches(features, {})
+    with pytest.raises(ValueError, match="unknown feature 'nope'"):
+        engine.register_touches(features, {"nope": np.zeros((3, 3))})
+    with pytest.raises(ValueError, match="finite"):
+        engine.register_touches(features, {"top": np.full((3, 3), np.nan)})
+
+
+def test_the_engine_imports_neither_cadquery_nor_trimesh():
+    code = (
+        "import sys, fixturecad.registration.engine, fixturecad.registration.generate;"
+        "print(sorted(m for m in ('cadquery', 'trimesh', 'OCP') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_contact_type_of_point_touches():
+    features, _ = _plan("inclined-plane-cylinder", "default")
+    group = engine.point_touches(features["cylinder"], np.full((2, 3), 100.0), np.arange(2))
+    assert group.ctype == ContactType.parse("P/F-C/M")
+    assert group.rows == 1
