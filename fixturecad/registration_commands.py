@@ -108,7 +108,7 @@ def simulate(
         raise InputError(str(error).splitlines()[0]) from None
     rng = np.random.default_rng(seed)
     # The residual test allows for the tessellation: chord errors spread over [0, tolerance].
-    chord = float(document.get("stl_tolerance_mm", DEFAULT_CHORD_TOLERANCE_MM))
+    chord = float((document.get("files") or {}).get("stl_tolerance_mm", DEFAULT_CHORD_TOLERANCE_MM))
     sigma = float(np.sqrt(noise**2 + chord**2 / 3.0))
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:

@@ -1,0 +1,175 @@
+"""The generated standalone register.py: numpy and scipy only, same pose as the library."""
+
+import ast
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fixturecad.registration import engine
+from fixturecad.registration.generate import register_source, write_register_script
+from fixturecad.registration.pose import fixture2meas_from_rt, pose_errors, random_rotation
+
+templates = pytest.importorskip("fixturecad.templates")
+NAMES = sorted(templates.TEMPLATES)
+
+
+def features_document(name):
+    """features.json content of a template at its defaults (no CAD)."""
+    template = templates.TEMPLATES[name]()
+    plans = template.touch_plans()
+    return {
+        "schema": "fixturecad.features/1",
+        "template": name,
+        "parameters": template.parameters_json(),
+        "contact_class": plans["default"].contact_class,
+        "features": [feature.to_json() for feature in template.features()],
+        "touch_plan": plans["default"].touches,
+        "plans": {key: plan.to_json() for key, plan in plans.items()},
+    }
+
+
+@pytest.fixture(scope="module")
+def bare_site(tmp_path_factory):
+    """A directory holding numpy and scipy only: the import path of a robot cell's PC."""
+    import numpy
+    import scipy
+
+    site = tmp_path_factory.mktemp("site")
+    for module in (numpy, scipy):
+        root = Path(module.__file__).parent
+        (site / root.name).symlink_to(root)
+        libs = root.parent / f"{root.name}.libs"
+        if libs.exists():
+            (site / libs.name).symlink_to(libs)
+    return site
+
+
+def run_bare(site, cwd, *args):
+    """Python without site-packages, with only ``site`` on its path."""
+    env = {"PATH": os.environ.get("PATH", "/usr/bin"), "PYTHONPATH": str(site)}
+    return subprocess.run([sys.executable, "-S", *map(str, args)], cwd=cwd, capture_output=True, text=True, env=env)
+
+
+def write_csv(path, touches):
+    lines = ["feature,x,y,z"]
+    for feature, points in touches.items():
+        lines += [",".join([feature] + [repr(float(x)) for x in p]) for p in points]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_the_bare_interpreter_has_no_fixturecad_nor_cadquery(bare_site, tmp_path):
+    code = "import numpy, scipy\nfor name in ('fixturecad', 'cadquery', 'trimesh'):\n" \
+           "    try:\n        __import__(name)\n        print('found', name)\n    except ImportError:\n        pass\n"
+    out = run_bare(bare_site, tmp_path, "-c", code)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout == ""
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_generated_routine_gives_the_library_pose(name, bare_site, tmp_path):
+    document = features_document(name)
+    path = write_register_script(document, tmp_path / "register.py")
+    ast.parse(path.read_text())
+    features = {f["id"]: f for f in document["features"]}
+    entries = [e for e in document["touch_plan"] if "sensor" not in e] or document["touch_plan"]
+    point_plans = [p["touch_plan"] for p in document["plans"].values() if all("sensor" not in e for e in p["touch_plan"])]
+    entries = point_plans[0] if point_plans else entries
+    rng = np.random.default_rng(12)
+    truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
+    touches, _ = engine.plan_touches(entries, truth)
+    touches = {k: v + rng.normal(scale=0.003, size=v.shape) for k, v in touches.items()}
+    write_csv(tmp_path / "touches.csv", touches)
+    out = run_bare(bare_site, tmp_path, "register.py", "touches.csv", "--json")
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    from fixturecad.registration.features import feature_from_json
+
+    library = engine.register_touches({k: feature_from_json(v) for k, v in features.items()}, touches)
+    assert result["status"] == library["status"] == "unique"
+    assert np.abs(np.array(result["pose"]) - np.array(library["pose"])).max() < 1e-9
+    assert max(pose_errors(np.array(result["pose"]), truth)) < 0.05
+    for key in ("rms_residual_mm", "solutions", "covariance", "sigma_translation_mm", "sigma_rotation_deg"):
+        assert key in result
+    assert np.array(result["covariance"]).shape == (6, 6)
+
+
+def test_generated_api_and_nominal_pose(bare_site, tmp_path):
+    document = features_document("cube")
+    write_register_script(document, tmp_path / "register.py")
+    rng = np.random.default_rng(3)
+    truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
+    touches, _ = engine.plan_touches(document["touch_plan"], truth)
+    (tmp_path / "case.json").write_text(json.dumps({
+        "touches": {k: v.tolist() for k, v in touches.items()}, "truth": truth.tolist()}))
+    code = (
+        "import json, numpy as np\n"
+        "from register import register\n"
+        "case = json.load(open('case.json'))\n"
+        "touches = {k: np.array(v) for k, v in case['touches'].items()}\n"
+        "a = register(touches)\n"
+        "b = register(touches, initial_pose=np.array(case['truth']))\n"
+        "print(json.dumps([a['pose'], b['pose'], a['status']]))\n"
+    )
+    out = run_bare(bare_site, tmp_path, "-c", code)
+    assert out.returncode == 0, out.stderr
+    a, b, status = json.loads(out.stdout)
+    assert status == "unique"
+    assert np.abs(np.array(a) - truth).max() < 1e-9
+    assert np.abs(np.array(b) - truth).max() < 1e-9
+
+
+def test_generated_routine_reads_plane_and_line_sensors_from_json(bare_site, tmp_path):
+    document = features_document("quarter-sphere")
+    write_register_script(document, tmp_path / "register.py")
+    rng = np.random.default_rng(5)
+    truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
+    touches, contacts = engine.plan_touches(document["touch_plan"], truth)
+    entries = [{"feature": k, "point": p.tolist()} for k, v in touches.items() for p in v] + contacts
+    (tmp_path / "touches.json").write_text(json.dumps({"touches": entries}))
+    out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json")
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    assert result["status"] == "unique"
+    assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
+
+
+BAD_FILES = {
+    "unknown feature": ("feature,x,y,z\nnope,1,2,3\n", "unknown feature 'nope'"),
+    "NaN": ("feature,x,y,z\ntop,nan,2,3\n", "finite"),
+    "wrong columns": ("name,x,y\ntop,1,2\n", "columns feature,x,y,z"),
+    "empty file": ("", "empty"),
+    "too few touches": ("feature,x,y,z\ntop,1,2,3\ntop,4,5,6\n", "too few touches"),
+    "text": ("feature,x,y,z\ntop,a,b,c\n", "numbers"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_FILES))
+def test_bad_touch_files_are_one_line_and_exit_2(case, bare_site, tmp_path):
+    write_register_script(features_document("cube"), tmp_path / "register.py")
+    text, words = BAD_FILES[case]
+    (tmp_path / "touches.csv").write_text(text)
+    out = run_bare(bare_site, tmp_path, "register.py", "touches.csv")
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0], out.stderr
+    assert out.stdout == ""
+
+
+def test_the_template_fails_on_a_missing_key(tmp_path, monkeypatch):
+    from string import Template
+
+    from fixturecad.registration import generate
+
+    text = (Path(generate.__file__).parent / generate.TEMPLATE_NAME).read_text()
+    with pytest.raises(KeyError):
+        Template(text).substitute({})
+    source = register_source(features_document("cube"))
+    assert "import fixturecad" not in source and "from fixturecad" not in source
+    ast.parse(source)
+    with pytest.raises(ValueError, match="features"):
+        register_source({"template": "cube"})
