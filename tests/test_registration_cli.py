@@ -1,0 +1,120 @@
+"""`fixturecad register | simulate` on built fixtures; touches sampled on the STL mesh."""
+
+import json
+
+import numpy as np
+import pytest
+
+from cli import assert_bad_input, run
+from fixturecad.registration import engine
+from fixturecad.registration.pose import pose_errors
+
+templates = pytest.importorskip("fixturecad.templates")
+NAMES = sorted(templates.TEMPLATES)
+
+
+@pytest.fixture(scope="session")
+def built(tmp_path_factory):
+    """Build each template once per session (fixture.stl, features.json, register.py)."""
+    build = pytest.importorskip("fixturecad.build")
+    root = tmp_path_factory.mktemp("fixtures")
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = build.build(templates.make(name), root / name)
+        return cache[name]
+
+    return get
+
+
+def _sampler(folder, random_positions=False):
+    from fixturecad.registration.sampling import TouchSampler, load_mesh
+
+    document = json.loads((folder / "features.json").read_text())
+    return document, TouchSampler(document, load_mesh(folder / "fixture.stl"), "default", random_positions)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_touches_on_the_mesh_give_the_pose_within_the_chord_tolerance(name, built):
+    folder = built(name)
+    document, sampler = _sampler(folder, random_positions=True)
+    chord = document["files"]["stl_tolerance_mm"]
+    sigma = chord / np.sqrt(3.0)
+    rng = np.random.default_rng(21)
+    for _ in range(10):
+        touches, contacts, truth = sampler.draw(rng, 0.0)
+        result = engine.register_touches(sampler.features, touches, sigma_mm=sigma, contacts=contacts)
+        # Every touch within the chord tolerance of its feature at the recovered pose ...
+        assert result["status"] == "unique", result["status"]
+        assert result["rms_residual_mm"] <= chord
+        # ... and the pose as close as that tolerance allows (3 sigma of its propagated error).
+        problem = engine.Problem(engine.build_groups(sampler.features, touches, 0.0, contacts), sigma)
+        bound_t, bound_r = engine.sigmas(engine.cramer_rao_bound(problem, truth, chord))
+        dt, dr = pose_errors(np.array(result["pose"]), truth)
+        assert dt <= 3.0 * bound_t + 1e-6
+        assert np.degrees(dr) <= 3.0 * bound_r + 1e-6
+
+
+def _touch_csv(path, touches):
+    lines = ["feature,x,y,z"] + [
+        ",".join([k] + [repr(float(x)) for x in p]) for k, v in touches.items() for p in v
+    ]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_register_command_wraps_the_generated_routine(built, tmp_path):
+    folder = built("cube")
+    _, sampler = _sampler(folder)
+    touches, _, truth = sampler.draw(np.random.default_rng(2), 0.0)
+    _touch_csv(tmp_path / "touches.csv", touches)
+    out = run("register", folder, tmp_path / "touches.csv", "--json")
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    assert result["status"] == "unique"
+    assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-3
+    text = run("register", folder, tmp_path / "touches.csv")
+    assert text.returncode == 0 and "status: unique" in text.stdout
+
+
+@pytest.mark.parametrize(
+    "content,words",
+    [
+        ("feature,x,y,z\nnope,1,2,3\n", "unknown feature 'nope'"),
+        ("feature,x,y,z\ntop,1,2,nan\n", "finite"),
+        ("x,y,z\n1,2,3\n", "columns"),
+        ("", "empty"),
+        ("feature,x,y,z\ntop,1,2,3\n", "too few touches"),
+    ],
+)
+def test_register_command_refuses_bad_touch_files(built, tmp_path, content, words):
+    folder = built("cube")
+    (tmp_path / "touches.csv").write_text(content)
+    assert_bad_input(run("register", folder, tmp_path / "touches.csv"), words)
+
+
+def test_register_command_needs_a_built_folder(tmp_path):
+    (tmp_path / "touches.csv").write_text("feature,x,y,z\n")
+    assert_bad_input(run("register", tmp_path, tmp_path / "touches.csv"), "register.py")
+    assert_bad_input(run("simulate", tmp_path / "missing"), "does not exist")
+
+
+def test_simulate_reports_errors_against_the_bound_and_writes_a_plot(built):
+    folder = built("v-block")
+    out = run("simulate", folder, "--trials", 40, "--noise", 0.005, "--seed", 1)
+    assert out.returncode == 0, out.stderr
+    for words in ("median", "95th percentile", "Cramer-Rao", "success: 100.0 %"):
+        assert words in out.stdout
+    assert (folder / "simulation.png").stat().st_size > 1000
+    summary = json.loads((folder / "simulation.json").read_text())
+    assert summary["trials"] == 40 and summary["success_rate"] == 1.0
+    assert 0.7 < summary["ratio_translation_to_crb"] < 1.5
+    random_plan = run("simulate", folder, "--trials", 10, "--plan", "random", "--nominal")
+    assert random_plan.returncode == 0, random_plan.stderr
+
+
+def test_simulate_refuses_bad_options(built):
+    folder = built("cube")
+    assert_bad_input(run("simulate", folder, "--trials", 0), "--trials")
+    assert_bad_input(run("simulate", folder, "--noise", -1), "--noise")
+    assert_bad_input(run("simulate", folder, "--touch-plan", "nope"), "unknown touch plan 'nope'")
