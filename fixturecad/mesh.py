@@ -11,6 +11,9 @@ import numpy as np
 ANGULAR_TOLERANCE_RAD = 0.5
 
 
+MERGE_DIGITS = 9  # decimals of mm kept when merging the faces' shared boundary nodes
+
+
 class MeshError(RuntimeError):
     """The tessellation is not a clean closed surface."""
 
@@ -45,30 +48,67 @@ def triangulate(shape, tolerance: float, angular_tolerance: float = ANGULAR_TOLE
     return out
 
 
-def mesh_from_shape(shape, tolerance: float):
-    """A watertight, consistently wound trimesh of ``shape``; MeshError if that fails."""
-    import trimesh
+def merged_mesh(parts):
+    """One indexed mesh from per-face parts: shared boundary nodes merged, degenerate facets dropped.
 
-    parts = triangulate(shape, tolerance)
+    Returns vertices (n, 3) and faces (m, 3).
+    """
     offsets = np.cumsum([0] + [len(nodes) for _, nodes, _ in parts])
     vertices = np.vstack([nodes for _, nodes, _ in parts])
     faces = np.vstack([tri + offset for (_, _, tri), offset in zip(parts, offsets)])
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    # faces share their boundary edges' nodes exactly; merge on a tolerance far below the chord
-    mesh.merge_vertices(digits_vertex=9)
-    mesh.update_faces(mesh.nondegenerate_faces(height=1e-12))
-    mesh.remove_unreferenced_vertices()
-    check_mesh(mesh)
-    return mesh
+    # faces share their boundary edges' nodes exactly; merge far below any chord tolerance
+    _, first, inverse = np.unique(np.round(vertices, MERGE_DIGITS), axis=0, return_index=True, return_inverse=True)
+    vertices, faces = vertices[first], inverse.reshape(-1)[faces]
+    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    faces = faces[keep]
+    keep = _areas(vertices, faces) > 0
+    return vertices, faces[keep]
 
 
-def check_mesh(mesh) -> None:
-    """Raise MeshError unless the mesh is watertight, consistently wound, outward and non-degenerate."""
-    if not mesh.is_watertight:
-        raise MeshError("the STL mesh is not watertight")
-    if not mesh.is_winding_consistent:
-        raise MeshError("the STL mesh winding is not consistent")
-    if mesh.volume <= 0:
+def _areas(vertices, faces):
+    tris = vertices[faces]
+    return 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+
+
+def mesh_from_shape(shape, tolerance: float):
+    """Vertices and faces of a watertight, consistently outward-wound mesh of ``shape``; MeshError if not."""
+    vertices, faces = merged_mesh(triangulate(shape, tolerance))
+    check_mesh(vertices, faces)
+    return vertices, faces
+
+
+def check_mesh(vertices, faces) -> None:
+    """Raise MeshError unless every directed edge is met once in each direction (closed, consistent
+    winding), the enclosed volume is positive (outward) and no facet is degenerate."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    n = len(vertices)
+    forward = directed[:, 0] * n + directed[:, 1]
+    backward = directed[:, 1] * n + directed[:, 0]
+    unique_forward, counts = np.unique(forward, return_counts=True)
+    if np.any(counts != 1):
+        raise MeshError("the STL mesh has an edge used twice in the same direction (inconsistent winding or non-manifold)")
+    if not np.all(np.isin(backward, unique_forward)):
+        raise MeshError("the STL mesh is not watertight: some edge has no opposite neighbour")
+    if mesh_volume(vertices, faces) <= 0:
         raise MeshError("the STL mesh is inside out")
-    if np.any(mesh.area_faces <= 0):
+    if np.any(_areas(vertices, faces) <= 0):
         raise MeshError("the STL mesh has degenerate facets")
+
+
+def mesh_volume(vertices, faces) -> float:
+    tris = vertices[faces]
+    return float(np.einsum("ij,ij->i", tris[:, 0], np.cross(tris[:, 1], tris[:, 2])).sum() / 6.0)
+
+
+def write_stl(path, vertices, faces, name: str = "fixture") -> None:
+    """Binary STL, mm, facet normals from the winding."""
+    tris = vertices[faces].astype(np.float32)
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    record = np.zeros(len(faces), dtype=[("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
+    record["normal"], record["tri"] = normals, tris
+    header = f"{name} fixturecad binary STL, units mm".encode()[:80].ljust(80, b" ")
+    with open(path, "wb") as handle:
+        handle.write(header)
+        handle.write(np.uint32(len(faces)).tobytes())
+        handle.write(record.tobytes())

@@ -46,6 +46,7 @@ class Param:
     maximum: float
     help: str
     short: str  # letter used in output folder names, e.g. "r" -> quarter-sphere-r40
+    limit_reason: str = ""  # why the range stops where it does, quoted when a value is refused
 
     def describe(self) -> str:
         return f"--{self.name} {self.unit} (default {_fmt(self.default)}, {_fmt(self.minimum)}..{_fmt(self.maximum)}): {self.help}"
@@ -123,6 +124,8 @@ class Template:
     origin: str = ""  # where it comes from (paper figure, shop practice)
     PARAMS: tuple = ()
     contact_class: str = ""  # catalogue class of the default plan
+    # Two directions the preview looks from (towards the origin), chosen to show the sensing faces.
+    VIEW_DIRECTIONS: tuple = ((1.0, -1.6, 1.1), (-1.0, 1.6, -1.1))
 
     def __init__(self, base: bool = False, **values):
         self.base = bool(base)
@@ -149,8 +152,10 @@ class Template:
             param = cls.param(key.replace("_", "-"))
             number = parse_number(param.name, value)
             if not (param.minimum <= number <= param.maximum):
+                reason = f" ({param.limit_reason})" if param.limit_reason else ""
                 raise InputError(
-                    f"--{param.name} must be between {_fmt(param.minimum)} and {_fmt(param.maximum)} {param.unit}, got {_fmt(number)}"
+                    f"--{param.name} must be between {_fmt(param.minimum)} and {_fmt(param.maximum)} {param.unit}"
+                    f"{reason}, got {_fmt(number)}"
                 )
             out[param.name] = number
         for param in cls.PARAMS:

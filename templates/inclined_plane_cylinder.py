@@ -28,11 +28,12 @@ class InclinedPlaneCylinder(Template):
     origin = "paper Example Two, Figs. 9-10"
     PARAMS = (
         Param("radius", "mm", 20.0, 2.0, 200.0, "radius of the cylinder", "r"),
-        Param("angle", "deg", 45.0, 10.0, 80.0,
-              "inclination between plane and axis (0 and 90 cannot fix the rotation about the axis)", "a"),
+        Param("angle", "deg", 45.0, 10.0, 80.0, "inclination between plane and axis", "a",
+              "near 90 the plane cannot fix the rotation about the axis; near 0 the face runs off to infinity"),
         Param("length", "mm", 40.0, 2.0, 1000.0, "cylinder length below the lowest point of the inclined face", "l"),
     )
     contact_class = "{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}"
+    VIEW_DIRECTIONS = ((-1.0, -1.3, 1.0), (1.2, 1.0, -0.3))
 
     @property
     def normal(self) -> np.ndarray:

@@ -1,0 +1,158 @@
+"""preview.png: the fixture with its sensing features coloured and labelled, and the default touch plan.
+
+Rendering needs matplotlib only (Agg, no pyplot). ``fixturecad build`` runs it
+in a child process (``python -m fixturecad.preview OUT.png``, scene pickled on
+stdin) started before cadquery is imported, so importing matplotlib and
+drawing overlap the CAD work.
+"""
+
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+FEATURE_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf")
+INERT_COLOUR = "#c8c8c8"
+TOUCH_COLOUR = "#111111"
+VIEWS = ((28.0, -60.0), (-28.0, 120.0))  # (elevation, azimuth) deg: front-top and back-bottom
+
+
+def view_from_direction(direction) -> tuple:
+    """(elevation, azimuth) in degrees of a camera looking from ``direction`` towards the origin."""
+    x, y, z = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    return float(np.degrees(np.arcsin(z))), float(np.degrees(np.arctan2(y, x)))
+
+
+def scene(title: str, faces: list, features: list, touches: list, views=VIEWS) -> dict:
+    """The data a preview needs, plain numpy.
+
+    faces: ``[(vertices (n, 3), triangles (m, 3), feature id or None)]``;
+    features: ``[{"id", "kind", "element", "anchor" (3,), "normal" (3,) or None, "segment" ((2, 3) for
+    lines or None)}]``; touches: ``[{"point" (3,), "normal" (3,) or None, "label" str, "text" str}]``;
+    views: two (elevation, azimuth). Labels and touches whose outward normal faces away from a view
+    are left out of it (matplotlib would draw them through the solid).
+    """
+    return {"title": title, "faces": faces, "features": features, "touches": touches, "views": views}
+
+
+def render(data: dict, path) -> None:
+    """Draw ``data`` (see :func:`scene`) into a PNG at ``path``."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    colours = {f["id"]: FEATURE_COLOURS[i % len(FEATURE_COLOURS)] for i, f in enumerate(data["features"])}
+    all_points = np.vstack([v for v, _, _ in data["faces"]])
+    low, high = all_points.min(axis=0), all_points.max(axis=0)
+    centre, half = (low + high) / 2, (high - low).max() / 2 * 1.05
+    light = np.array([0.4, -0.5, 0.75]) / np.linalg.norm([0.4, -0.5, 0.75])
+
+    figure = Figure(figsize=(13, 6.5), dpi=100)
+    FigureCanvasAgg(figure)
+    for panel, (elev, azim) in enumerate(data.get("views", VIEWS)):
+        ax = figure.add_subplot(1, 2, panel + 1, projection="3d")
+        e, a = np.radians(elev), np.radians(azim)
+        camera = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+
+        def seen(normal):
+            """Labels on faces turned away from this view would show through: leave them out."""
+            return normal is None or float(np.dot(normal, camera)) > 0.05
+
+        for vertices, triangles, feature_id in data["faces"]:
+            tris = vertices[triangles]
+            normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+            normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+            shade = 0.55 + 0.45 * np.abs(normals @ light)
+            base = np.array(_rgb(colours.get(feature_id, INERT_COLOUR)))
+            face_colours = np.clip(base[None, :] * shade[:, None], 0, 1)
+            ax.add_collection3d(Poly3DCollection(tris, facecolors=face_colours, edgecolors="none", alpha=1.0))
+        for feature in data["features"]:
+            if feature.get("segment") is not None:
+                seg = np.asarray(feature["segment"])
+                ax.plot(seg[:, 0], seg[:, 1], seg[:, 2], color=colours[feature["id"]], linewidth=4, zorder=5)
+            anchor = np.asarray(feature["anchor"])
+            if not seen(feature.get("normal")):
+                continue
+            ax.text(*anchor, f" {feature['id']} ({feature['element']})", color=colours[feature["id"]],
+                    fontsize=9, fontweight="bold", zorder=10)
+        visible = [t for t in data["touches"] if seen(t.get("normal"))]
+        if visible:
+            points = np.array([t["point"] for t in visible])
+            ax.scatter(points[:, 0], points[:, 1], points[:, 2], color=TOUCH_COLOUR, s=26, depthshade=False, zorder=20)
+            for touch in visible:
+                ax.text(*touch["point"], f" {touch['label']}", color=TOUCH_COLOUR, fontsize=9, fontweight="bold", zorder=21)
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_zlim(centre[2] - half, centre[2] + half)
+        ax.set_box_aspect((1, 1, 1))
+        ax.set_xlabel("X mm")
+        ax.set_ylabel("Y mm")
+        ax.set_zlabel("Z mm")
+        ax.view_init(elev=elev, azim=azim)
+        ax.set_title(f"view from elevation {elev:.0f}, azimuth {azim:.0f} deg", fontsize=9)
+    handles = [Patch(color=colours[f["id"]], label=f"{f['id']}: {f['kind']} ({f['element']})") for f in data["features"]]
+    handles.append(Line2D([], [], marker="o", linestyle="", color=TOUCH_COLOUR, label="touch of the default plan"))
+    if data["touches"]:
+        listing = "default touch plan\n" + "\n".join(t["text"] for t in data["touches"])
+        figure.text(0.5, 0.88, listing, ha="center", va="top", multialignment="left", fontsize=8, family="monospace",
+                    bbox={"facecolor": "white", "edgecolor": "#888888", "alpha": 0.85})
+    figure.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=9, frameon=False)
+    figure.suptitle(data["title"], fontsize=11)
+    figure.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.1, wspace=0.05)
+    figure.savefig(path)
+
+
+def _rgb(colour: str):
+    colour = colour.lstrip("#")
+    return [int(colour[i : i + 2], 16) / 255 for i in (0, 2, 4)]
+
+
+class Renderer:
+    """A child process that imports matplotlib now and draws when it is sent a scene."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "fixturecad.preview", str(self.path)],
+            stdin=subprocess.PIPE, stderr=subprocess.PIPE,
+        )
+
+    def send(self, data: dict) -> None:
+        """Hand the scene over (through a file beside the PNG) and let the child draw it."""
+        scene_path = self.path.with_suffix(".scene.pickle")
+        scene_path.write_bytes(pickle.dumps(data))
+        self.process.stdin.write(str(scene_path).encode() + b"\n")
+        self.process.stdin.close()
+
+    def wait(self) -> None:
+        """Wait for the PNG; RuntimeError if drawing failed."""
+        error = self.process.stderr.read()
+        self.process.wait()
+        if self.process.returncode != 0:
+            lines = error.decode(errors="replace").strip().splitlines()
+            raise RuntimeError(f"preview rendering failed: {lines[-1] if lines else 'no message'}")
+
+    def cancel(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+
+
+def _main(argv: list) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (import now, while the parent builds)
+
+    scene_path = Path(sys.stdin.readline().strip())
+    data = pickle.loads(scene_path.read_bytes())
+    scene_path.unlink()
+    render(data, argv[0])
+
+
+if __name__ == "__main__":
+    _main(sys.argv[1:])
