@@ -1,0 +1,182 @@
+"""``fixturecad build | templates | suggest``: files, round trips, bad input, --force, speed-relevant imports."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cli import assert_bad_input, run
+from fixturecad.build import build, features_document, load_schema, validate_document
+from fixturecad.cli import main
+from fixturecad.registration.features import feature_from_json
+from fixturecad.templates import TEMPLATES, make
+
+jsonschema = pytest.importorskip("jsonschema")
+trimesh = pytest.importorskip("trimesh")
+cq = pytest.importorskip("cadquery")
+
+
+def cli(*args):
+    """Run ``fixturecad ARGS`` in this process: (exit code, stdout, stderr) via capsys by the caller."""
+    try:
+        main([str(a) for a in args])
+    except SystemExit as exit_:
+        return exit_.code
+    return 0
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    """Each template built once at its default parameters through the library entry point."""
+    root = tmp_path_factory.mktemp("built")
+    return {name: build(make(name), root / name) for name in TEMPLATES}
+
+
+@pytest.mark.parametrize("name", list(TEMPLATES))
+def test_build_writes_the_four_files(built, name):
+    folder = built[name]
+    for file in ("fixture.step", "fixture.stl", "features.json", "preview.png"):
+        assert (folder / file).stat().st_size > 0, file
+    assert (folder / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(folder.parent.glob(".*tmp")), "staging folders left behind"
+
+
+@pytest.mark.parametrize("name", list(TEMPLATES))
+def test_features_json_is_valid_and_round_trips(built, name):
+    document = json.loads((built[name] / "features.json").read_text())
+    validate_document(document)
+    assert document["schema"] == "fixturecad.features/1" and document["units"] == "mm"
+    fixture = make(name)
+    assert document["contact_class"] == fixture.contact_class
+    for entry, feature in zip(document["features"], fixture.features()):
+        assert feature_from_json(entry).to_json() == feature.to_json()
+    assert document["touch_plan"] == document["plans"]["default"]["touch_plan"]
+
+
+def test_schema_refuses_unknown_fields_and_bad_kinds():
+    document = features_document(make("cube"))
+    validate_document(document)
+    for broken in (
+        {**document, "colour": "red"},
+        {**document, "features": [{**document["features"][0], "kind": "torus"}]},
+        {**document, "features": [{**document["features"][0], "extra": 1}]},
+        {**document, "touch_plan": [{**document["touch_plan"][0], "contact": "X/F-PL/M"}]},
+    ):
+        with pytest.raises(jsonschema.ValidationError):
+            validate_document(broken)
+    assert load_schema()["additionalProperties"] is False
+
+
+@pytest.mark.parametrize("name", list(TEMPLATES))
+def test_step_reimports_as_one_solid_with_the_same_volume(built, name):
+    text = (built[name] / "fixture.step").read_text(errors="replace")
+    assert "AUTOMOTIVE_DESIGN" in text or "AP242" in text  # AP214 or AP242
+    assert ".MILLI." in text
+    shape = cq.importers.importStep(str(built[name] / "fixture.step")).val()
+    assert len(shape.Solids()) == 1 and shape.isValid()
+    assert shape.Volume() == pytest.approx(make(name).volume(), rel=1e-6)
+
+
+@pytest.mark.parametrize("name", list(TEMPLATES))
+def test_stl_is_watertight_consistent_and_close_to_the_volume(built, name):
+    mesh = trimesh.load(built[name] / "fixture.stl")
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.is_volume
+    assert np.all(mesh.area_faces > 0)
+    assert mesh.volume == pytest.approx(make(name).volume(), rel=2e-3)
+
+
+@pytest.mark.parametrize("tolerance", [0.01, 0.001])
+def test_stl_chord_tolerance_is_absolute_and_honoured(tolerance):
+    from fixturecad.mesh import mesh_from_shape
+
+    radius = 10.0
+    vertices, faces = mesh_from_shape(make("quarter-sphere", radius=radius).solid(), tolerance)
+    tris = vertices[faces]
+    on_sphere = np.all(np.abs(np.linalg.norm(tris, axis=2) - radius) < 1e-9, axis=1)
+    flat = np.all(np.abs(tris[:, :, 1]) < 1e-9, axis=1) | np.all(np.abs(tris[:, :, 2]) < 1e-9, axis=1)
+    sag = radius - np.linalg.norm(tris[on_sphere & ~flat].mean(axis=1), axis=1)
+    assert 0 < sag.max() <= tolerance
+
+
+def test_cli_build_default_folder_prints_it_and_refuses_to_overwrite(tmp_path):
+    result = run("build", "quarter-sphere", "--radius", "40", "--stl-tolerance", "0.05", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "out/quarter-sphere-r40"
+    folder = tmp_path / "out" / "quarter-sphere-r40"
+    assert (folder / "features.json").exists()
+    marker = folder / "marker"
+    marker.write_text("old")
+    again = run("build", "quarter-sphere", "--radius", "40", cwd=tmp_path)
+    assert_bad_input(again, "exists", "--force")
+    assert marker.exists()
+    forced = run("build", "quarter-sphere", "--radius", "40", "--force", "--stl-tolerance", "0.05", cwd=tmp_path)
+    assert forced.returncode == 0, forced.stderr
+    assert not marker.exists() and (folder / "fixture.step").exists()
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["quarter-sphere-r40"]
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["build", "pyramid"], ["unknown template", "quarter-sphere"]),
+        (["build", "quarter-sphere", "--radius", "nan"], ["--radius"]),
+        (["build", "quarter-sphere", "--radius", "inf"], ["--radius"]),
+        (["build", "quarter-sphere", "--radius", "-40"], ["--radius"]),
+        (["build", "quarter-sphere", "--radius"], ["--radius", "value"]),
+        (["build", "quarter-sphere", "--size", "4"], ["--size", "--radius"]),
+        (["build", "cube", "--size", "0"], ["--size"]),
+        (["build", "inclined-plane-cylinder", "--angle", "90"], ["--angle"]),
+        (["build", "inclined-plane-cylinder", "--angle", "0.5"], ["--angle"]),
+        (["build", "cube", "--stl-tolerance", "0"], ["--stl-tolerance"]),
+        (["build", "cube", "--stl-tolerance", "nan"], ["--stl-tolerance"]),
+        (["suggest", "{G3}{nonsense"], ["class"]),
+        (["suggest", "{Q}"], ["unknown class"]),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, words):
+    result = run(*args, cwd=tmp_path)
+    assert_bad_input(result, *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_out_option_and_base(tmp_path, capsys):
+    target = tmp_path / "deep" / "fixture"
+    assert cli("build", "cube", "--size", "20", "--base", "--out", target) == 0
+    assert capsys.readouterr().out.strip() == str(target)
+    document = json.loads((target / "features.json").read_text())
+    assert document["parameters"] == {"size": 20.0, "base": True}
+    shape = cq.importers.importStep(str(target / "fixture.step")).val()
+    assert shape.Volume() == pytest.approx(make("cube", base=True, size=20).volume(), rel=1e-6)
+
+
+def test_templates_lists_parameters_ranges_and_classes(capsys):
+    assert cli("templates") == 0
+    out = capsys.readouterr().out
+    for name in TEMPLATES:
+        assert name in out
+    assert "{G3}{S-S}{S-T2}{C-R-C}" in out and "--radius" in out and "5..500" in out
+    assert cli("templates", "--format", "json") == 0
+    document = json.loads(capsys.readouterr().out)
+    assert {entry["template"] for entry in document} == set(TEMPLATES)
+
+
+@pytest.mark.parametrize(
+    "text, template",
+    [
+        ("{G3}{S-S}{S-T2}{C-R-C}", "quarter-sphere"),
+        ("{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}", "inclined-plane-cylinder"),
+        ("{S-C}x3 {S-T2}x3", "inclined-plane-cylinder"),
+        ("{S-T2}x6", "cube"),
+    ],
+)
+def test_suggest_goes_from_class_to_a_buildable_design(capsys, text, template):
+    assert cli("suggest", text) == 0
+    out = capsys.readouterr().out
+    assert f"fixturecad build {template}" in out
+
+
+def test_cli_help_does_not_import_cadquery():
+    code = "import sys, fixturecad.cli; assert 'cadquery' not in sys.modules and 'matplotlib' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)
