@@ -46,6 +46,7 @@ SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is g
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
 UNSWEPT_PER_BLOCK = 6  # fallback starts per candidate centre refined before stopping at a solution
 SAME_POSE_ROTATION_RAD = 1e-4
+STEP_TOLERANCE = 1e-4  # LM stops once a step moves the touches less than this many sigma
 STALLED_AFTER = 4  # LM iterations before a refinement may be abandoned as stalled ...
 STALLED_COST_FACTOR = 1e4  # ... while its cost exceeds this many times sigma^2 per row ...
 STALLED_DECREASE = 0.5  # ... and one iteration removes less than half of it
@@ -109,13 +110,10 @@ def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
         ctype = ContactType("P", True, fixture_element, fixture_fixed)
         sensor = make_side("P", True, c=points, o=points)
         rho = 0.0
-    group = TouchGroup(
+    return TouchGroup(
         feature, ctype, sensor, fixture_side(feature, fixture_fixed), np.full(n, float(rho)),
         np.asarray(index), points,
     )
-    values, _ = residuals_and_jacobian(ctype, sensor, group.fixture, np.eye(3), np.zeros(3), group.rho)
-    group.rows = values.shape[1]
-    return group
 
 
 def sensor_geometry(ctype, sensor, contact_point=None):
@@ -180,16 +178,37 @@ class Problem:
     def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM):
         self.groups = [g for g in groups if g.count]
         self.sigma = float(sigma_mm)
-        self.row_touch = np.concatenate([np.repeat(g.index, g.rows) for g in self.groups]) if self.groups else np.zeros(0, int)
-        self.size = len(self.row_touch)
+        self._scale = None
+        # Rows are computed per contact type: groups of one type on different
+        # features are stacked into one call of the contact model.
+        self.batches = _merge(self.groups)
 
     def evaluate(self, rotation, translation):
         values, jacobians = [], []
-        for g in self.groups:
+        for g in self.batches:
             v, J = residuals_and_jacobian(g.ctype, g.sensor, g.fixture, rotation, translation, g.rho)
+            g.rows = v.shape[1]
             values.append(v.reshape(-1))
             jacobians.append(J.reshape(-1, 6))
         return np.concatenate(values), np.concatenate(jacobians)
+
+    def _count_rows(self):
+        if any(not g.rows for g in self.batches):
+            self.evaluate(np.eye(3), np.zeros(3))
+
+    @property
+    def row_touch(self):
+        """The touch index of every row of ``evaluate``, shape (m,)."""
+        self._count_rows()
+        if not self.batches:
+            return np.zeros(0, int)
+        return np.concatenate([np.repeat(g.index, g.rows) for g in self.batches])
+
+    @property
+    def size(self):
+        """Number of rows m."""
+        self._count_rows()
+        return int(sum(g.rows * g.count for g in self.batches))
 
     def evaluate_batch(self, rotations, translations):
         """Residuals (K, m) and fixture-frame Jacobians (K, m, 6) at K poses in one call.
@@ -231,11 +250,42 @@ class Problem:
 
     def scale(self):
         """A length (mm) that balances rotation and translation columns of the Jacobian."""
-        pts = [g.points for g in self.groups if g.points is not None]
-        if not pts:
-            return 1.0
-        pts = np.concatenate(pts)
-        return max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
+        if self._scale is None:
+            pts = [g.points for g in self.groups if g.points is not None]
+            self._scale = 1.0
+            if pts:
+                pts = np.concatenate(pts)
+                self._scale = max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
+        return self._scale
+
+
+def _merge(groups):
+    """Groups of one contact type stacked into one, fixture geometry repeated per touch."""
+    by_type = {}
+    for g in groups:
+        key = (g.ctype, tuple(sorted(g.sensor.geometry)), tuple(sorted(g.fixture.geometry)))
+        by_type.setdefault(key, []).append(g)
+    batches = []
+    for members in by_type.values():
+        if len(members) == 1:
+            batches.append(members[0])
+            continue
+        first = members[0]
+        sensor = {key: np.concatenate([np.asarray(m.sensor.geometry[key]) for m in members])
+                  for key in first.sensor.geometry}
+        fixture = {}
+        for key in first.fixture.geometry:
+            parts = []
+            for m in members:
+                value = np.asarray(m.fixture.geometry[key])
+                parts.append(np.broadcast_to(value, (m.count,) + value.shape))
+            fixture[key] = np.concatenate(parts)
+        batches.append(TouchGroup(
+            None, first.ctype, type(first.sensor)(first.sensor.kind, first.sensor.fixed, sensor),
+            type(first.fixture)(first.fixture.kind, first.fixture.fixed, fixture),
+            np.concatenate([m.rho for m in members]), np.concatenate([m.index for m in members]),
+        ))
+    return batches
 
 
 def _subset(group, keep):
@@ -264,6 +314,7 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
     w = np.ones(len(r)) if weights is None else weights
     cost = float(np.sum(w * r * r))
     hopeless = STALLED_COST_FACTOR * problem.sigma**2 * max(len(r), 1)
+    length = problem.scale()
     lam = 1e-4
     for iteration in range(max_iterations):
         Jw = J * w[:, None]
@@ -283,7 +334,7 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
             lam *= 8.0
         if not improved:
             break
-        small = np.linalg.norm(step[:3]) < 1e-13 and np.linalg.norm(step[3:]) < 1e-11
+        small = np.linalg.norm(step[:3]) * length + np.linalg.norm(step[3:]) < STEP_TOLERANCE * problem.sigma
         tiny = cost - cost2 <= 1e-16 * max(cost, 1e-30) + 1e-30
         stalled = may_give_up and iteration >= STALLED_AFTER and cost2 > hopeless and cost2 > STALLED_DECREASE * cost
         rotation, translation, r, J, cost = R2, t2, r2, J2, cost2
@@ -867,7 +918,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     """
     groups = build_groups(features, touches, ball_radius_mm, contacts)
     problem = Problem(groups, sigma_mm)
-    if problem.size < 1:
+    if not problem.groups:
         raise ValueError("no touches given")
     solutions = solve(problem, initial_pose)
     best = solutions[0]

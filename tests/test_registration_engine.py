@@ -302,4 +302,4 @@ def test_contact_type_of_point_touches():
     features, _ = _plan("inclined-plane-cylinder", "default")
     group = engine.point_touches(features["cylinder"], np.full((2, 3), 100.0), np.arange(2))
     assert group.ctype == ContactType.parse("P/F-C/M")
-    assert group.rows == 1
+    assert engine.Problem([group]).size == 2

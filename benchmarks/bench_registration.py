@@ -1,0 +1,117 @@
+"""Registration time and accuracy on labelled touches, against trimesh.registration.icp.
+
+Run by hand: ``python benchmarks/bench_registration.py [--trials N]``. For
+every template it builds the fixture (STL, features.json, register.py) in a
+temporary folder, samples 7-12 touches per trial on the STL (sigma 5 um),
+and times the generated routine with a nominal pose (1 deg, 1 mm off) and
+without one, then ``trimesh.registration.icp`` on the same touches against
+the STL from the same nominal pose. Targets (issue 4): median under 2 ms
+with a nominal pose, under 20 ms without.
+"""
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from machine import describe  # noqa: E402
+
+NOISE_MM = 0.005
+MIN_TOUCHES = 7
+
+
+def point_plan(template):
+    """A point-probe plan of the template with at least MIN_TOUCHES touches."""
+    plans = template.touch_plans()
+    for name in ["default"] + sorted(plans):
+        entries = plans[name].touches
+        if all("sensor" not in e for e in entries):
+            break
+    entries = [dict(e) for e in entries]
+    count = sum(len(e["points"]) for e in entries)
+    if count < MIN_TOUCHES:
+        # One more touch on the first feature, halfway between its first two.
+        first = entries[0]
+        pts = np.asarray(first["points"], float)
+        first["points"] = pts.tolist() + [(0.5 * (pts[0] + pts[-1]) + 0.25 * (pts[1] - pts[0])).tolist()]
+    return name, entries
+
+
+def run(trials, seed):
+    import trimesh
+
+    from fixturecad.build import build, features_document
+    from fixturecad.registration.pose import apply_twist, fixture2meas_from_rt, pose_errors
+    from fixturecad.registration.sampling import TouchSampler, load_mesh
+    from fixturecad.registration_commands import load_routine
+    from fixturecad.templates import TEMPLATES, make
+
+    rng = np.random.default_rng(seed)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in sorted(TEMPLATES):
+            template = make(name)
+            folder = build(template, Path(tmp) / name)
+            routine = load_routine(folder)
+            plan_name, entries = point_plan(template)
+            document = features_document(template)
+            document["plans"] = {"bench": {"touch_plan": entries}}
+            mesh = load_mesh(folder / "fixture.stl")
+            sampler = TouchSampler(document, mesh, "bench")
+            sigma = float(np.hypot(NOISE_MM, document["files"]["stl_tolerance_mm"] / np.sqrt(3.0)))
+            timing = {"nominal": [], "none": [], "icp": []}
+            errors = {"nominal": [], "none": [], "icp": []}
+            for _ in range(trials):
+                touches, _, truth = sampler.draw(rng, NOISE_MM)
+                twist = np.concatenate([np.radians(1.0) * _unit(rng), _unit(rng)])
+                nominal = fixture2meas_from_rt(*apply_twist(truth[:3, :3], truth[:3, 3], twist))
+                for key, initial in (("nominal", nominal), ("none", None)):
+                    start = time.perf_counter()
+                    result = routine.register(touches, initial_pose=initial, sigma_mm=sigma)
+                    timing[key].append(time.perf_counter() - start)
+                    errors[key].append(pose_errors(np.array(result["pose"]), truth))
+                points = np.concatenate(list(touches.values()))
+                start = time.perf_counter()
+                meas2fixture, _, _ = trimesh.registration.icp(
+                    points, mesh, initial=np.linalg.inv(nominal), threshold=1e-9, max_iterations=50
+                )
+                timing["icp"].append(time.perf_counter() - start)
+                errors["icp"].append(pose_errors(np.linalg.inv(meas2fixture), truth))
+            count = sum(len(e["points"]) for e in entries)
+            rows.append((name, plan_name, count, timing, errors))
+    return rows
+
+
+def _unit(rng):
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+def report(rows, trials):
+    print(describe())
+    print(f"{trials} trials per template, touches sampled on the STL, noise {NOISE_MM * 1e3:.0f} um")
+    header = ("template", "touches", "ms nominal", "ms no pose", "ms icp", "um ours", "um icp",
+              "mdeg ours", "mdeg icp", "icp/ours err", "icp/ours time")
+    print(" | ".join(header))
+    for name, plan, count, timing, errors in rows:
+        med = {k: statistics.median(v) * 1e3 for k, v in timing.items()}
+        et = {k: statistics.median(e[0] for e in v) * 1e3 for k, v in errors.items()}
+        er = {k: statistics.median(np.degrees(e[1]) for e in v) * 1e3 for k, v in errors.items()}
+        print(" | ".join([
+            f"{name} ({plan})", str(count), f"{med['nominal']:.2f}", f"{med['none']:.2f}", f"{med['icp']:.2f}",
+            f"{et['nominal']:.2f}", f"{et['icp']:.2f}", f"{er['nominal']:.2f}", f"{er['icp']:.2f}",
+            f"{et['icp'] / et['nominal']:.1f}", f"{med['icp'] / med['nominal']:.1f}",
+        ]))
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    report(run(args.trials, args.seed), args.trials)
