@@ -15,22 +15,23 @@ from fixturecad.registration.generate import register_source, write_register_scr
 from fixturecad.registration.pose import fixture2meas_from_rt, pose_errors, random_rotation
 
 templates = pytest.importorskip("fixturecad.templates")
+build = pytest.importorskip("fixturecad.build")
 NAMES = sorted(templates.TEMPLATES)
 
 
 def features_document(name):
     """features.json content of a template at its defaults (no CAD)."""
-    template = templates.TEMPLATES[name]()
-    plans = template.touch_plans()
-    return {
-        "schema": "fixturecad.features/1",
-        "template": name,
-        "parameters": template.parameters_json(),
-        "contact_class": plans["default"].contact_class,
-        "features": [feature.to_json() for feature in template.features()],
-        "touch_plan": plans["default"].touches,
-        "plans": {key: plan.to_json() for key, plan in plans.items()},
-    }
+    return build.features_document(templates.make(name))
+
+
+def generated_case(tmp_path, name, seed, entries=None):
+    """register.py of a template in tmp_path, a random true pose and its exact touches."""
+    document = features_document(name)
+    write_register_script(document, tmp_path / "register.py")
+    rng = np.random.default_rng(seed)
+    truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
+    touches, contacts = engine.plan_touches(entries or document["touch_plan"], truth)
+    return document, truth, touches, contacts
 
 
 @pytest.fixture(scope="module")
@@ -99,11 +100,7 @@ def test_generated_routine_gives_the_library_pose(name, bare_site, tmp_path):
 
 
 def test_generated_api_and_nominal_pose(bare_site, tmp_path):
-    document = features_document("cube")
-    write_register_script(document, tmp_path / "register.py")
-    rng = np.random.default_rng(3)
-    truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
-    touches, _ = engine.plan_touches(document["touch_plan"], truth)
+    _, truth, touches, _ = generated_case(tmp_path, "cube", 3)
     (tmp_path / "case.json").write_text(json.dumps({
         "touches": {k: v.tolist() for k, v in touches.items()}, "truth": truth.tolist()}))
     code = (
@@ -124,11 +121,7 @@ def test_generated_api_and_nominal_pose(bare_site, tmp_path):
 
 
 def test_generated_routine_reads_plane_and_line_sensors_from_json(bare_site, tmp_path):
-    document = features_document("quarter-sphere")
-    write_register_script(document, tmp_path / "register.py")
-    rng = np.random.default_rng(5)
-    truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
-    touches, contacts = engine.plan_touches(document["touch_plan"], truth)
+    _, truth, touches, contacts = generated_case(tmp_path, "quarter-sphere", 5)
     entries = [{"feature": k, "point": p.tolist()} for k, v in touches.items() for p in v] + contacts
     (tmp_path / "touches.json").write_text(json.dumps({"touches": entries}))
     out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json")
