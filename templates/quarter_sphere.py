@@ -11,19 +11,23 @@ sphere contact leaves two solutions along the edge; the default plan adds a
 second sphere touch to pick one. The ``point-probe`` plan needs only a point
 probe: 3 + 2 touches on the flats and 2 on the sphere.
 
-The mounting base leaves the spherical face along (0, 1, 1)/sqrt(2); the
-sphere's sensing patch stops BASE_CLEARANCE_MM short of the stem.
+The mounting base leaves the spherical face near the +X end of the edge, along
+a direction 35 deg from X towards the curved face, so that both flats, the
+edge and most of the sphere stay free; the sphere's sensing patch stops
+BASE_CLEARANCE_MM short of the stem.
 """
 
 import math
 
 import numpy as np
 
+from fixturecad.errors import InputError
 from fixturecad.registration.features import Extent, Line, Plane, Sphere
 from fixturecad.templates.base import BASE_CLEARANCE_MM, Anchor, Param, Plan, Template, halfspace, touch, unit
 
-STEM_DIRECTION = unit([0.0, 1.0, 1.0])
-STEM_RADIUS_FRACTION = 0.2
+_TILT = math.radians(35.0)
+STEM_DIRECTION = np.array([math.cos(_TILT), math.sin(_TILT) / math.sqrt(2), math.sin(_TILT) / math.sqrt(2)])
+STEM_RADIUS_FRACTION = 0.15
 
 
 class QuarterSphere(Template):
@@ -50,11 +54,17 @@ class QuarterSphere(Template):
 
     def anchor(self) -> Anchor:
         r, rs = self.radius, self._stem_radius()
-        start = 0.5 * r  # along the stem axis; >= rs keeps the stem off both flats
+        # start where the whole stem section keeps the clearance from both flats
+        dy = STEM_DIRECTION[1]
         h0 = math.sqrt(r**2 - rs**2)
+        start = max((BASE_CLEARANCE_MM + rs * math.sqrt(1 - dy**2)) / dy, 0.5 * h0)
         cap = r - h0
         inside = math.pi * rs**2 * (h0 - start) + math.pi * cap**2 * (3 * r - cap) / 3.0
-        return Anchor(start * STEM_DIRECTION, STEM_DIRECTION, rs, r, 1.2 * r, 0.15 * r, inside)
+        return Anchor(start * STEM_DIRECTION, STEM_DIRECTION, rs, 1.5 * r - start, 1.2 * r, 0.15 * r, inside)
+
+    def check(self) -> None:
+        if self.base and self.anchor().start @ STEM_DIRECTION >= math.sqrt(self.radius**2 - self._stem_radius() ** 2):
+            raise InputError(f"--base needs a larger --radius than {self.radius:g} mm to keep its stem off the flats")
 
     def features(self) -> list:
         r = self.radius

@@ -32,6 +32,7 @@ class SpherePlate(Template):
         Param("thickness", "mm", 8.0, 1.0, 100.0, "plate thickness", "t"),
     )
     contact_class = "{S-S}{S-S}{S-S}{S-S}{S-S}{S-S}"
+    VIEW_DIRECTIONS = ((1.0, -1.6, 1.1), (-1.0, 1.4, 1.2))
 
     def check(self) -> None:
         if self.spacing * math.sqrt(3) < 2 * self.radius + 2.0:

@@ -29,6 +29,7 @@ class VBlock(Template):
         Param("depth", "mm", 20.0, 2.0, 500.0, "depth of the groove", "d"),
     )
     contact_class = "{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}"
+    VIEW_DIRECTIONS = ((-1.2, -0.9, 1.2), (-1.2, 0.9, 1.2))
 
     @property
     def half_width(self) -> float:
