@@ -66,10 +66,11 @@ def register(
         raise InputError(f"--sigma must be a positive number of mm, got {sigma}")
     routine = load_routine(out_dir)
     try:
-        points, contacts, radius = read_touch_file(touches, list(routine.FEATURES))
+        points, contacts, radius, approaches = read_touch_file(touches, list(routine.FEATURES))
         radius = radius if ball_radius is None else ball_radius
         check_enough(routine.FEATURES, points, contacts, radius)
-        result = routine.register(points, sigma_mm=sigma, ball_radius_mm=radius, contacts=contacts)
+        result = routine.register(points, sigma_mm=sigma, ball_radius_mm=radius, contacts=contacts,
+                                  approaches=approaches)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     typer.echo(json.dumps(result, indent=2) if as_json else format_result(result))

@@ -64,6 +64,8 @@ class TouchGroup:
 
     ``points`` (n, 3) mm in the measurement frame are the probe points (point
     touches) or ball centres (ball-tip touches); None for other sensors.
+    ``approach`` (n, 3), optional: the direction the probe moved to make each
+    touch (measurement frame; NaN rows unknown).
     ``index`` (n,) numbers the touches in the caller's order.
     """
 
@@ -75,6 +77,7 @@ class TouchGroup:
     index: np.ndarray
     points: np.ndarray | None = None
     rows: int = 0
+    approach: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -542,16 +545,25 @@ def chi_square_passes(cost, rows, rank, sigma):
     return cost / sigma**2 <= chi_square_quantile(CHI2_CONFIDENCE, dof)
 
 
-def outside_extent(problem, rotation, translation, tolerance=EXTENT_TOLERANCE_MM):
-    """Touch indices whose contact, mapped into the fixture frame, lies off the feature's patch."""
-    bad = []
+def inadmissible(problem, rotation, translation, tolerance=EXTENT_TOLERANCE_MM):
+    """Touch indices that cannot have happened at this pose.
+
+    A touch is inadmissible when its contact, mapped into the fixture frame,
+    lies off the feature's finite patch, or when the probe's approach
+    direction (if known) points along the outward surface normal there.
+    """
+    bad = set()
     for g in problem.groups:
         if g.points is None:
             continue
         local = (g.points - translation) @ rotation
-        inside = g.feature.contains(local, tolerance)
-        bad.extend(int(i) for i in g.index[~np.asarray(inside)])
-    return bad
+        inside = np.asarray(g.feature.contains(local, tolerance))
+        bad.update(int(i) for i in g.index[~inside])
+        if g.approach is not None and g.feature.kind in ("plane", "sphere", "cylinder"):
+            outward = g.feature.normal_at(local) @ rotation.T
+            away = np.einsum("ij,ij->i", outward, g.approach) > 0.0
+            bad.update(int(i) for i in g.index[away & np.all(np.isfinite(g.approach), axis=1)])
+    return sorted(bad)
 
 
 def solve(problem, initial_pose=None, batch=6):
@@ -605,7 +617,7 @@ def _judged(problem, candidate, length):
     """A solution with its rank, residual test and extent check filled in."""
     candidate.rank = jacobian_rank(candidate.jacobian, length)
     candidate.passes = chi_square_passes(candidate.cost, len(candidate.residuals), candidate.rank, problem.sigma)
-    candidate.outside = outside_extent(problem, candidate.rotation, candidate.translation)
+    candidate.outside = inadmissible(problem, candidate.rotation, candidate.translation)
     candidate.admissible = not candidate.outside
     return candidate
 
@@ -871,8 +883,12 @@ def separating_touch(features, solutions):
 # ---------------------------------------------------------------- front door
 
 
-def build_groups(features, touches, ball_radius_mm=0.0, contacts=()):
-    """Touch groups from point touches by feature id and generic contact touches."""
+def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=None):
+    """Touch groups from point touches by feature id and generic contact touches.
+
+    ``approaches`` optional dict id -> (n, 3): probe approach directions of the touches.
+    """
+    approaches = approaches or {}
     groups, index = [], 0
     for feature_id, points in touches.items():
         if feature_id not in features:
@@ -888,7 +904,13 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=()):
             continue
         ids = np.arange(index, index + len(pts))
         index += len(pts)
-        groups.append(point_touches(features[feature_id], pts, ids, ball_radius_mm))
+        group = point_touches(features[feature_id], pts, ids, ball_radius_mm)
+        if feature_id in approaches:
+            approach = np.asarray(approaches[feature_id], dtype=np.float64).reshape(-1, 3)
+            if approach.shape != pts.shape:
+                raise ValueError(f"approaches on {feature_id} must have shape {pts.shape}, got {approach.shape}")
+            group.approach = approach
+        groups.append(group)
     for contact in contacts:
         feature_id = contact.get("feature")
         if feature_id not in features:
@@ -904,7 +926,7 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=()):
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
-                     contacts=()):
+                     contacts=(), approaches=None):
     """Register a fixture from labelled touches; return the result dict (see module doc).
 
     Parameters
@@ -915,14 +937,16 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     sigma_mm : float, touch noise standard deviation for the chi-square test and covariance
     ball_radius_mm : float, radius of a ball tip (0 for a point probe); touches are ball centres
     contacts : list of dict, touches of other contact types (see ``contact_touch``)
+    approaches : dict id -> array-like, shape (n, 3), optional probe approach directions;
+        a pose at which a probe would have touched a surface from inside is rejected
     """
-    groups = build_groups(features, touches, ball_radius_mm, contacts)
+    groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
     problem = Problem(groups, sigma_mm)
     if not problem.groups:
         raise ValueError("no touches given")
     solutions = solve(problem, initial_pose)
     best = solutions[0]
-    result = {"flagged": [], "free_motions": [], "separating_touch": None, "outside_extent": best.outside}
+    result = {"flagged": [], "free_motions": [], "separating_touch": None, "inadmissible": best.outside}
     good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
     if best.rank < 6:
         status = "underdetermined"

@@ -2,7 +2,10 @@
 
 A CSV touch file has the header ``feature,x,y,z``: one touch per line, the
 feature id of features.json and the probe point (or ball centre) in mm in the
-measurement frame. A JSON touch file holds contacts of any type::
+measurement frame. Three more columns ``ax,ay,az`` may give the direction the
+probe moved to make the touch; poses at which it would have touched a surface
+from inside are then rejected. A JSON touch file holds contacts of any type
+(a point touch may carry ``"approach": [ax, ay, az]``)::
 
     {"ball_radius_mm": 0.0,
      "touches": [{"feature": "flat_a", "point": [x, y, z]},
@@ -23,34 +26,41 @@ import sys
 import numpy as np
 
 CSV_COLUMNS = ("feature", "x", "y", "z")
+APPROACH_COLUMNS = ("ax", "ay", "az")
 MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
 
 
 def read_touch_csv(text, feature_ids):
-    """Touches by feature id, each an array (n, 3) mm, from CSV text."""
+    """Touches and approach directions by feature id, arrays (n, 3), from CSV text."""
     if not text.strip():
         raise ValueError("the touch file is empty")
     rows = list(csv.reader(io.StringIO(text)))
     header = tuple(cell.strip().lower() for cell in rows[0])
-    if header != CSV_COLUMNS:
-        raise ValueError(f"touch CSV must have the columns {','.join(CSV_COLUMNS)}, got {','.join(header)}")
-    touches = {}
+    if header not in (CSV_COLUMNS, CSV_COLUMNS + APPROACH_COLUMNS):
+        raise ValueError(
+            f"touch CSV must have the columns {','.join(CSV_COLUMNS)} (and optionally "
+            f"{','.join(APPROACH_COLUMNS)}), got {','.join(header)}"
+        )
+    width = len(header)
+    touches, approaches = {}, {}
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not cell.strip() for cell in row):
             continue
-        if len(row) != 4:
-            raise ValueError(f"line {line}: expected 4 values (feature,x,y,z), got {len(row)}")
+        if len(row) != width:
+            raise ValueError(f"line {line}: expected {width} values ({','.join(header)}), got {len(row)}")
         _check_id(row[0].strip(), feature_ids, f"line {line}")
         try:
-            point = [float(cell) for cell in row[1:]]
+            values = [float(cell) for cell in row[1:]]
         except ValueError:
             raise ValueError(f"line {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
-        if not np.all(np.isfinite(point)):
+        if not np.all(np.isfinite(values)):
             raise ValueError(f"line {line}: coordinates must be finite, got {','.join(row[1:])}")
-        touches.setdefault(row[0].strip(), []).append(point)
+        touches.setdefault(row[0].strip(), []).append(values[:3])
+        approaches.setdefault(row[0].strip(), []).append(values[3:] or [np.nan] * 3)
     if not touches:
         raise ValueError("the touch file has a header but no touches")
-    return {key: np.array(value) for key, value in touches.items()}
+    arrays = {key: np.array(value) for key, value in approaches.items()}
+    return {key: np.array(value) for key, value in touches.items()}, (arrays if width == 7 else {})
 
 
 def read_touch_json(text, feature_ids):
@@ -63,7 +73,7 @@ def read_touch_json(text, feature_ids):
         raise ValueError(f"touch JSON is not valid JSON: {error.msg} at line {error.lineno}") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("touches"), list):
         raise ValueError('touch JSON must be an object with a "touches" list')
-    touches, contacts = {}, []
+    touches, contacts, approaches = {}, [], {}
     for k, entry in enumerate(doc["touches"]):
         where = f"touch {k}"
         if not isinstance(entry, dict):
@@ -82,10 +92,16 @@ def read_touch_json(text, feature_ids):
             if point.shape != (3,):
                 raise ValueError(f"{where}: point must be [x, y, z] in mm")
             touches.setdefault(entry["feature"], []).append(point)
+            approach = entry.get("approach")
+            approach = [np.nan] * 3 if approach is None else _check_finite(approach, f"{where}: approach")
+            approaches.setdefault(entry["feature"], []).append(approach)
     if not touches and not contacts:
         raise ValueError("the touch file has no touches")
     radius = float(doc.get("ball_radius_mm", 0.0))
-    return {key: np.array(value) for key, value in touches.items()}, contacts, radius
+    arrays = {key: np.array(value, dtype=float) for key, value in approaches.items()}
+    if all(np.isnan(a).all() for a in arrays.values()):
+        arrays = {}
+    return {key: np.array(value) for key, value in touches.items()}, contacts, radius, arrays
 
 
 def _check_id(feature_id, feature_ids, where):
@@ -104,7 +120,7 @@ def _check_finite(value, where):
 
 
 def read_touch_file(path, feature_ids):
-    """(touches, contacts, ball radius) from a .csv or .json touch file."""
+    """(touches, contacts, ball radius, approaches) from a .csv or .json touch file."""
     try:
         with open(path, encoding="utf-8") as handle:
             text = handle.read()
@@ -112,7 +128,8 @@ def read_touch_file(path, feature_ids):
         raise ValueError(f"cannot read touch file {path}: {error.strerror}") from None
     if str(path).lower().endswith(".json"):
         return read_touch_json(text, feature_ids)
-    return read_touch_csv(text, feature_ids), [], 0.0
+    touches, approaches = read_touch_csv(text, feature_ids)
+    return touches, [], 0.0, approaches
 
 
 def check_enough(features, touches, contacts, ball_radius_mm):
@@ -157,11 +174,12 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.0
     try:
         if not np.isfinite(args.sigma) or args.sigma <= 0:
             raise ValueError(f"--sigma must be a positive number of mm, got {args.sigma}")
-        touches, contacts, radius = read_touch_file(args.touches, list(features))
+        touches, contacts, radius, approaches = read_touch_file(args.touches, list(features))
         if args.ball_radius is not None:
             radius = args.ball_radius
         check_enough(features, touches, contacts, radius)
-        result = register(touches, sigma_mm=args.sigma, ball_radius_mm=radius, contacts=contacts)
+        result = register(touches, sigma_mm=args.sigma, ball_radius_mm=radius, contacts=contacts,
+                          approaches=approaches)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2

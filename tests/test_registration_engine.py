@@ -227,6 +227,24 @@ def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
         assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
 
 
+def test_the_probe_approach_rules_out_the_mirror():
+    """Touching the ball from above: the mirrored pose would have the probe touch from inside."""
+    features = _ball_block()
+    angles = np.radians([20.0, 140.0, 260.0])
+    ring = np.sqrt(100.0 - 9.0)
+    plan = {
+        "ball": np.c_[ring * np.cos(angles), ring * np.sin(angles), np.full(3, 33.0)],
+        "front": np.array([[10.0, 0, 15], [-30, 0, 50]]),
+        "side": np.array([[-50.0, 20, 10]]),
+    }
+    truth = _random_pose(np.random.default_rng(1))
+    touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in plan.items()}
+    down = np.tile(truth[:3, :3] @ [0.0, 0.0, -1.0], (3, 1))
+    result = engine.register_touches(features, touches, approaches={"ball": down})
+    assert result["status"] == "unique"
+    assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
+
+
 def test_three_collinear_touches_on_a_plane_are_underdetermined():
     features, _ = _plan("cube", "default")
     truth = _random_pose(np.random.default_rng(5))
