@@ -207,8 +207,30 @@ class _Feature:
     def _parameter(self, points):
         return None
 
-    def _common_json(self) -> dict:
-        return {"id": self.id, "kind": self.kind, "element": self.element, "sensing": self.sensing}
+    def to_json(self) -> dict:
+        """The ``features[]`` entry of features.json: id, kind, element, sensing, geometry, extent."""
+        out = {"id": self.id, "kind": self.kind, "element": self.element, "sensing": self.sensing}
+        for key in _GEOMETRY_KEYS[self.kind]:
+            value = getattr(self, key)
+            out[key] = value.tolist() if isinstance(value, np.ndarray) else float(value)
+        if self.kind != "point":
+            out["extent"] = self.extent.to_json()
+        return out
+
+
+class _Axial(_Feature):
+    """Cylinders and lines: geometry measured from an axis through ``point``."""
+
+    def _direction(self):
+        raise NotImplementedError
+
+    def _parameter(self, points):
+        return (check_points(points) - self.point) @ self._direction()
+
+    def _radial(self, points):
+        points = check_points(points)
+        r = points - self.point
+        return r - np.outer(r @ self._direction(), self._direction())
 
 
 @dataclass
@@ -238,13 +260,6 @@ class Plane(_Feature):
     def normal_at(self, points):
         return np.tile(self.normal, (len(check_points(points)), 1))
 
-    def to_json(self) -> dict:
-        return {
-            **self._common_json(),
-            "point": self.point.tolist(),
-            "normal": self.normal.tolist(),
-            "extent": self.extent.to_json(),
-        }
 
 
 @dataclass
@@ -274,17 +289,10 @@ class Sphere(_Feature):
     def closest_point(self, points):
         return self.center + self.radius * self.normal_at(points)
 
-    def to_json(self) -> dict:
-        return {
-            **self._common_json(),
-            "center": self.center.tolist(),
-            "radius": self.radius,
-            "extent": self.extent.to_json(),
-        }
 
 
 @dataclass
-class Cylinder(_Feature):
+class Cylinder(_Axial):
     """A convex cylindrical face: axis through ``point`` along unit ``axis``, ``radius`` mm."""
 
     id: str
@@ -302,13 +310,8 @@ class Cylinder(_Feature):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def _parameter(self, points):
-        return (check_points(points) - self.point) @ self.axis
-
-    def _radial(self, points):
-        points = check_points(points)
-        r = points - self.point
-        return r - np.outer(r @ self.axis, self.axis)
+    def _direction(self):
+        return self.axis
 
     def signed_distance(self, points):
         return np.linalg.norm(self._radial(points), axis=1) - self.radius
@@ -320,18 +323,10 @@ class Cylinder(_Feature):
         points = check_points(points)
         return points - self._radial(points) + self.radius * self.normal_at(points)
 
-    def to_json(self) -> dict:
-        return {
-            **self._common_json(),
-            "point": self.point.tolist(),
-            "axis": self.axis.tolist(),
-            "radius": self.radius,
-            "extent": self.extent.to_json(),
-        }
 
 
 @dataclass
-class Line(_Feature):
+class Line(_Axial):
     """An edge: through ``point`` along unit ``direction``; ``signed_distance`` is unsigned."""
 
     id: str
@@ -347,13 +342,8 @@ class Line(_Feature):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def _parameter(self, points):
-        return (check_points(points) - self.point) @ self.direction
-
-    def _radial(self, points):
-        points = check_points(points)
-        r = points - self.point
-        return r - np.outer(r @ self.direction, self.direction)
+    def _direction(self):
+        return self.direction
 
     def signed_distance(self, points):
         return np.linalg.norm(self._radial(points), axis=1)
@@ -366,13 +356,6 @@ class Line(_Feature):
         points = check_points(points)
         return points - self._radial(points)
 
-    def to_json(self) -> dict:
-        return {
-            **self._common_json(),
-            "point": self.point.tolist(),
-            "direction": self.direction.tolist(),
-            "extent": self.extent.to_json(),
-        }
 
 
 @dataclass
@@ -398,8 +381,6 @@ class Point(_Feature):
     def closest_point(self, points):
         return np.tile(self.point, (len(check_points(points)), 1))
 
-    def to_json(self) -> dict:
-        return {**self._common_json(), "point": self.point.tolist()}
 
 
 # ``normal`` is the geometry attribute of a plane (its unit normal), so the
