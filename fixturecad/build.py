@@ -58,6 +58,7 @@ def features_document(template: Template, stl_tolerance: float = DEFAULT_STL_TOL
         "template": template.name,
         "parameters": template.parameters_json(),
         "contact_class": template.contact_class,
+        "frame": template.FRAME,
         "volume_mm3": template.volume(),
         "files": {"step": FILES["step"], "stl": FILES["stl"], "stl_tolerance_mm": stl_tolerance,
                   "preview": FILES["preview"]},

@@ -79,18 +79,21 @@ def templates(fmt: FormatOption = Format.table):
                    "help": p.help} for p in cls.PARAMS]
         document.append({"template": cls.name, "title": cls.title, "origin": cls.origin,
                          "contact_class": cls.contact_class, "plans": plans, "parameters": params})
-        for index, p in enumerate(cls.PARAMS):
-            first = index == 0
+        plan_rows = list(plans.items())
+        for index in range(max(len(cls.PARAMS), len(plan_rows))):
+            p = cls.PARAMS[index] if index < len(cls.PARAMS) else None
+            plan, plan_class = plan_rows[index] if index < len(plan_rows) else ("", "")
             rows.append({
-                "template": cls.name if first else "",
-                "class": cls.contact_class if first else "",
-                "parameter": f"--{p.name}",
-                "unit": p.unit,
-                "default": f"{p.default:g}",
-                "range": f"{p.minimum:g}..{p.maximum:g}",
-                "origin": cls.origin if first else "",
+                "template": cls.name if index == 0 else "",
+                "parameter": f"--{p.name}" if p else "",
+                "unit": p.unit if p else "",
+                "default": f"{p.default:g}" if p else "",
+                "range": f"{p.minimum:g}..{p.maximum:g}" if p else "",
+                "plan": plan,
+                "class": plan_class,
+                "origin": cls.origin if index == 0 else "",
             })
-    columns = ["template", "class", "parameter", "unit", "default", "range", "origin"]
+    columns = ["template", "parameter", "unit", "default", "range", "plan", "class", "origin"]
     typer.echo(render(rows, columns, fmt, document))
 
 

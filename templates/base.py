@@ -124,6 +124,7 @@ class Template:
     origin: str = ""  # where it comes from (paper figure, shop practice)
     PARAMS: tuple = ()
     contact_class: str = ""  # catalogue class of the default plan
+    FRAME: str = ""  # where the fixture frame sits, in words (features.json "frame")
     # Two directions the preview looks from (towards the origin), chosen to show the sensing faces.
     VIEW_DIRECTIONS: tuple = ((1.0, -1.6, 1.1), (-1.0, 1.6, -1.1))
 

@@ -18,6 +18,7 @@ class Cube(Template):
     origin = "paper Fig. 1"
     PARAMS = (Param("size", "mm", 50.0, 5.0, 1000.0, "edge length of the cube", "s"),)
     contact_class = "{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}"
+    FRAME = "origin at the corner where the left (x = 0), front (y = 0) and bottom faces meet; axes along the edges; cube in [0, size]^3"
     VIEW_DIRECTIONS = ((1.0, -1.6, 1.1), (-1.6, 0.7, 0.9))
 
     def body(self):

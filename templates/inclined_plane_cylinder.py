@@ -33,6 +33,7 @@ class InclinedPlaneCylinder(Template):
         Param("length", "mm", 40.0, 2.0, 1000.0, "cylinder length below the lowest point of the inclined face", "l"),
     )
     contact_class = "{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}"
+    FRAME = "paper Fig. 10: origin where the axis meets the plane, Z = s along the axis, Y = n x s, X = Y x Z"
     VIEW_DIRECTIONS = ((-1.0, -1.3, 1.0), (1.2, 1.0, -0.3))
 
     @property

@@ -36,6 +36,7 @@ class QuarterSphere(Template):
     origin = "paper Example One, Fig. 8"
     PARAMS = (Param("radius", "mm", 40.0, 5.0, 500.0, "radius of the sphere", "r"),)
     contact_class = "{G3}{S-S}{S-T2}{C-R-C}"
+    FRAME = "origin at the ball centre; X along the edge where the flats meet; flat_a in z = 0, flat_b in y = 0; material at y >= 0, z >= 0"
     VIEW_DIRECTIONS = ((0.45, -1.0, -0.8), (0.45, 1.0, 0.9))
 
     def body(self):

@@ -32,6 +32,7 @@ class SpherePlate(Template):
         Param("thickness", "mm", 8.0, 1.0, 100.0, "plate thickness", "t"),
     )
     contact_class = "{S-S}{S-S}{S-S}{S-S}{S-S}{S-S}"
+    FRAME = "origin at the centre of the plate top face, Z up; ball k at azimuth 90 + 120 (k - 1) deg"
     VIEW_DIRECTIONS = ((1.0, -1.6, 1.1), (-1.0, 1.4, 1.2))
 
     def check(self) -> None:

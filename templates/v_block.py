@@ -29,6 +29,7 @@ class VBlock(Template):
         Param("depth", "mm", 20.0, 2.0, 500.0, "depth of the groove", "d"),
     )
     contact_class = "{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}"
+    FRAME = "origin on the end face at the top, above the groove bottom line; X along the groove, Z up; block in x [0, size], z [-size, 0]"
     VIEW_DIRECTIONS = ((-1.2, -0.9, 1.2), (-1.2, 0.9, 1.2))
 
     @property

@@ -180,3 +180,31 @@ def test_suggest_goes_from_class_to_a_buildable_design(capsys, text, template):
 def test_cli_help_does_not_import_cadquery():
     code = "import sys, fixturecad.cli; assert 'cadquery' not in sys.modules and 'matplotlib' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_failed_build_leaves_nothing_behind(tmp_path, monkeypatch):
+    import fixturecad.mesh
+
+    def broken(*args, **kwargs):
+        raise fixturecad.mesh.MeshError("simulated failure")
+
+    monkeypatch.setattr(fixturecad.mesh, "write_stl", broken)
+    with pytest.raises(fixturecad.mesh.MeshError):
+        build(make("cube", size=10), tmp_path / "cube")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_forced_build_keeps_the_old_folder(tmp_path, monkeypatch):
+    import fixturecad.mesh
+
+    target = build(make("cube", size=10), tmp_path / "cube")
+    before = (target / "features.json").read_text()
+
+    def broken(*args, **kwargs):
+        raise fixturecad.mesh.MeshError("simulated failure")
+
+    monkeypatch.setattr(fixturecad.mesh, "write_stl", broken)
+    with pytest.raises(fixturecad.mesh.MeshError):
+        build(make("cube", size=12), target, force=True)
+    assert (target / "features.json").read_text() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["cube"]
