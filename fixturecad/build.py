@@ -76,7 +76,7 @@ def default_target(template: Template, out_root: Path | None = None) -> Path:
 def build(template: Template, target: Path, force: bool = False,
           stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM) -> Path:
     """Write the fixture folder ``target``; return it. InputError if it exists and not ``force``."""
-    from fixturecad.preview import Renderer
+    from fixturecad.sideprocess import SideProcess
 
     check_stl_tolerance(stl_tolerance)
     target = Path(target)
@@ -85,18 +85,18 @@ def build(template: Template, target: Path, force: bool = False,
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
     staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
-    renderer = Renderer(staging / FILES["preview"])  # imports matplotlib while we build the solid
+    side = SideProcess(staging)  # imports matplotlib and scipy while we import cadquery
     try:
-        _write_all(template, staging, stl_tolerance, renderer)
+        _write_all(template, staging, stl_tolerance, side)
         _move_into_place(staging, target)
     except BaseException:
-        renderer.cancel()
+        side.cancel()
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return target
 
 
-def _write_all(template: Template, folder: Path, stl_tolerance: float, renderer) -> None:
+def _write_all(template: Template, folder: Path, stl_tolerance: float, side) -> None:
     from fixturecad.brep import match_features
     from fixturecad.mesh import mesh_from_shape, triangulate, write_stl
 
@@ -111,18 +111,19 @@ def _write_all(template: Template, folder: Path, stl_tolerance: float, renderer)
 
     size = max(shape.BoundingBox().xlen, shape.BoundingBox().ylen, shape.BoundingBox().zlen)
     parts = triangulate(shape, PREVIEW_CHORD_FRACTION * size)
-    renderer.send(_scene(template, features, matches, parts))  # drawn while we write the rest
-
+    document = features_document(template, stl_tolerance)
+    (folder / FILES["features"]).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    # the side process draws preview.png and writes register.py while we write STEP and STL
+    side.send(_scene(template, features, matches, parts), folder / FILES["preview"],
+              folder / FILES["features"], folder / FILES["register"])
     shape.exportStep(str(folder / FILES["step"]))
     vertices, faces = mesh_from_shape(shape, stl_tolerance)
     write_stl(folder / FILES["stl"], vertices, faces, template.slug())
-    document = features_document(template, stl_tolerance)
-    (folder / FILES["features"]).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    _write_register_script(document, folder / FILES["register"])
-    renderer.wait()
+    side.wait()
 
 
-def _write_register_script(document: dict, path: Path) -> None:
+def write_register_script(document: dict, path: Path) -> None:
+    """register.py beside features.json (run in the side process)."""
     # --- register.py hook: the generator belongs to the registration layer. ---
     # While fixturecad.registration.generate is absent the build skips it.
     try:

@@ -1,15 +1,9 @@
 """preview.png: the fixture with its sensing features coloured and labelled, and the default touch plan.
 
 Rendering needs matplotlib only (Agg, no pyplot). ``fixturecad build`` runs it
-in a child process (``python -m fixturecad.preview OUT.png``, scene pickled on
-stdin) started before cadquery is imported, so importing matplotlib and
-drawing overlap the CAD work.
+in a side process (:mod:`fixturecad.sideprocess`) so that importing matplotlib
+and drawing overlap the CAD work.
 """
-
-import pickle
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -111,48 +105,3 @@ def _rgb(colour: str):
     return [int(colour[i : i + 2], 16) / 255 for i in (0, 2, 4)]
 
 
-class Renderer:
-    """A child process that imports matplotlib now and draws when it is sent a scene."""
-
-    def __init__(self, path):
-        self.path = Path(path)
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "fixturecad.preview", str(self.path)],
-            stdin=subprocess.PIPE, stderr=subprocess.PIPE,
-        )
-
-    def send(self, data: dict) -> None:
-        """Hand the scene over (through a file beside the PNG) and let the child draw it."""
-        scene_path = self.path.with_suffix(".scene.pickle")
-        scene_path.write_bytes(pickle.dumps(data))
-        self.process.stdin.write(str(scene_path).encode() + b"\n")
-        self.process.stdin.close()
-
-    def wait(self) -> None:
-        """Wait for the PNG; RuntimeError if drawing failed."""
-        error = self.process.stderr.read()
-        self.process.wait()
-        if self.process.returncode != 0:
-            lines = error.decode(errors="replace").strip().splitlines()
-            raise RuntimeError(f"preview rendering failed: {lines[-1] if lines else 'no message'}")
-
-    def cancel(self) -> None:
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait()
-
-
-def _main(argv: list) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (import now, while the parent builds)
-
-    scene_path = Path(sys.stdin.readline().strip())
-    data = pickle.loads(scene_path.read_bytes())
-    scene_path.unlink()
-    render(data, argv[0])
-
-
-if __name__ == "__main__":
-    _main(sys.argv[1:])
