@@ -43,6 +43,7 @@ DEFAULT_SIGMA_MM = 0.005  # touch noise standard deviation assumed by the chi-sq
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
+PLANE_CYLINDER_STEPS = 180  # axis directions tried on the cone about the plane normal
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
 UNSWEPT_PER_BLOCK = 6  # fallback starts per candidate centre refined before stopping at a solution
 SAME_POSE_ROTATION_RAD = 1e-4
@@ -413,10 +414,14 @@ def _anchor(feature):
 def initial_poses(problem):
     """Candidate starting poses (R, t) without a nominal pose: closed forms, then sweeps.
 
-    Returns (starts, blocks, swept): the starts come in ``blocks`` equal
-    blocks (one per candidate sphere centre); ``swept`` when each block is
-    made of sweeps of ``SWEEP_STEPS`` rotations about a measured direction.
+    Returns (starts, blocks, mode): the starts come in ``blocks`` equal
+    blocks (one per candidate sphere centre); ``mode`` is "closed" (closed
+    forms), "sweep" (each block made of sweeps of ``SWEEP_STEPS`` rotations
+    about a measured direction) or "random" (no direction known).
     """
+    starts = plane_cylinder_starts(problem)
+    if starts:
+        return starts, len(starts), "closed"
     point_groups = [g for g in problem.groups if g.points is not None]
     centres = _sphere_centre_candidates(point_groups)
     rotations = []
@@ -436,7 +441,7 @@ def initial_poses(problem):
             if R is not None:
                 starts.append((R, t))
         if starts:
-            return starts, len(starts), False
+            return starts, len(starts), "closed"
     if len(centres) >= 2 and not rotations:
         # The line through two sphere centres fixes a direction: sweep about it.
         (f1, m1), (f2, m2) = centres[:2]
@@ -446,7 +451,7 @@ def initial_poses(problem):
                 R0 = rotation_aligning(f2 - f1, axis)
                 for k in range(SWEEP_STEPS):
                     rotations.append(rotation_from_vector(2.0 * np.pi * k / SWEEP_STEPS * axis) @ R0)
-    swept = bool(rotations)
+    mode = "sweep" if rotations else "random"
     if not rotations:
         rng = np.random.default_rng(0)
         rotations = [random_rotation(rng) for _ in range(FALLBACK_STARTS)]
@@ -458,8 +463,84 @@ def initial_poses(problem):
     if centres:
         # Translation in closed form from each candidate centre of a sphere.
         f, ms = centres[0]
-        return [(R, m - R @ f) for m in ms for R in rotations], len(ms), swept
-    return [(R, measured - R @ anchors) for R in rotations], 1, swept
+        return [(R, m - R @ f) for m in ms for R in rotations], len(ms), mode
+    return [(R, measured - R @ anchors) for R in rotations], 1, mode
+
+
+def plane_cylinder_starts(problem, steps=PLANE_CYLINDER_STEPS, keep=4):
+    """Starting poses by the paper's Example Two steps (a plane and a cylinder, point touches).
+
+    1. the plane normal from three or more touches (closed form, either sign);
+    2. the cylinder axis on the cone of the known plane-axis angle about that
+       normal, where the touches best fit a circle of the known radius in the
+       plane normal to it (a one-angle search, every local minimum kept);
+    3. a point on the axis from that circle's centre;
+    4. the frame from normal and axis, its origin where the axis meets the plane.
+    """
+    def point_group(kind):
+        found = [g for g in problem.groups
+                 if g.points is not None and g.feature.kind == kind and g.ctype.sensor == "P" and g.count >= 3]
+        return max(found, key=lambda g: g.count) if found else None
+
+    plane, cylinder = point_group("plane"), point_group("cylinder")
+    if plane is None or cylinder is None:
+        return []
+    n_meas = _plane_normal(plane.points)
+    n_fix, a_fix = plane.feature.normal, cylinder.feature.axis
+    cos_a = float(n_fix @ a_fix)
+    if n_meas is None or abs(cos_a) > 0.999 or abs(cos_a) < 1e-3:
+        return []
+    from .contacts import perpendicular_basis
+
+    sin_a = np.sqrt(1.0 - cos_a**2)
+    radius, pts = cylinder.feature.radius, cylinder.points
+    theta = np.linspace(0.0, 2.0 * np.pi, steps, endpoint=False)
+    # The fixture's origin of the frame: where its axis meets its plane.
+    origin_fix = cylinder.feature.point + ((plane.feature.point - cylinder.feature.point) @ n_fix / cos_a) * a_fix
+    frame_fix = _frame(n_fix, a_fix)
+    step = 2.0 * np.pi / steps
+
+    def circle_fits(n, e1, e2, theta):
+        """Axis directions, in-plane bases, circle centres and misfit for axis angles theta."""
+        axes = cos_a * n + sin_a * (np.cos(theta)[:, None] * e1 + np.sin(theta)[:, None] * e2)
+        u1, u2 = perpendicular_basis(axes)
+        q = np.stack([pts @ u1.T, pts @ u2.T], axis=-1).transpose(1, 0, 2)  # (K, n, 2)
+        # Circle through the touches in each axis' normal plane: 2 q.c + k = |q|^2, linear in (c, k).
+        A = np.concatenate([2.0 * q, np.ones(q.shape[:2] + (1,))], axis=2)
+        b = np.sum(q**2, axis=2)
+        normal = np.einsum("kni,knj->kij", A, A) + 1e-12 * np.eye(3)
+        centre = np.linalg.solve(normal, np.einsum("kni,kn->ki", A, b)[..., None])[:, :2, 0]
+        cost = np.sum((np.linalg.norm(q - centre[:, None], axis=2) - radius) ** 2, axis=1)
+        return axes, u1, u2, centre, cost
+
+    starts = []
+    for sign in (1.0, -1.0):
+        n = sign * n_meas
+        e1, e2 = perpendicular_basis(n)
+        theta = np.arange(steps) * step
+        cost = circle_fits(n, e1, e2, theta)[4]
+        before, after = np.roll(cost, 1), np.roll(cost, -1)
+        minima = np.flatnonzero((cost <= before) & (cost <= after))
+        minima = minima[np.argsort(cost[minima])][:keep]
+        # A parabola through each minimum and its neighbours refines the angle.
+        curvature = before[minima] - 2.0 * cost[minima] + after[minima]
+        shift = np.where(curvature > 0, 0.5 * (before[minima] - after[minima]) / np.maximum(curvature, 1e-300), 0.0)
+        refined = theta[minima] + step * np.clip(shift, -1.0, 1.0)
+        axes, u1, u2, centre, _ = circle_fits(n, e1, e2, refined)
+        for k in range(len(refined)):
+            s = axes[k]
+            on_axis = centre[k, 0] * u1[k] + centre[k, 1] * u2[k]
+            R = _frame(n, s) @ frame_fix.T
+            along = n @ (plane.points.mean(axis=0) - on_axis) / (n @ s)
+            starts.append((R, on_axis + along * s - R @ origin_fix))
+    return starts
+
+
+def _frame(normal, axis):
+    """Orthonormal frame (3, 3), columns: the normal, the axis made perpendicular to it, their cross."""
+    second = axis - (axis @ normal) * normal
+    second /= np.linalg.norm(second)
+    return np.column_stack([normal, second, np.cross(normal, second)])
 
 
 def _sphere_centre_candidates(point_groups):
@@ -574,9 +655,9 @@ def solve(problem, initial_pose=None, batch=6):
     """
     if initial_pose is not None:
         T = check_fixture2meas(initial_pose)
-        starts, first_batch, swept = [(T[:3, :3], T[:3, 3])], 1, True
+        starts, first_batch, mode = [(T[:3, :3], T[:3, 3])], 1, "nominal"
     else:
-        starts, first_batch, swept = _best_starts(problem, *initial_poses(problem))
+        starts, first_batch, mode = _best_starts(problem, *initial_poses(problem))
     length = problem.scale()
     solutions = []
     # The first batch holds every local minimum of the sweep: all solutions are looked for.
@@ -587,7 +668,7 @@ def solve(problem, initial_pose=None, batch=6):
         for R, t in starts[first:last]:
             known = [(s.rotation, s.translation) for s in solutions]
             # Far starts (no sweep) may take many slow steps: never abandon them.
-            R, t, r, J = levenberg_marquardt(problem, R, t, known=known, may_give_up=swept)
+            R, t, r, J = levenberg_marquardt(problem, R, t, known=known, may_give_up=mode != "random")
             if any(_same_pose((R, t), pose) for pose in known):
                 continue
             solutions.append(_judged(problem, Solution(R, t, r, J), length))
@@ -622,7 +703,7 @@ def _judged(problem, candidate, length):
     return candidate
 
 
-def _best_starts(problem, starts, blocks, swept):
+def _best_starts(problem, starts, blocks, mode):
     """Solve each start's translation (batched Gauss-Newton) and order the starts.
 
     Returns (starts, first): the ``first`` ones are those to refine in any
@@ -630,7 +711,7 @@ def _best_starts(problem, starts, blocks, swept):
     neighbours; otherwise the best few of each block. The rest follow by cost.
     """
     if not starts:
-        return [], 0, swept
+        return [], 0, mode
     Rs = np.array([R for R, _ in starts])
     ts = np.array([t for _, t in starts], dtype=float)
     for _ in range(2):
@@ -643,7 +724,7 @@ def _best_starts(problem, starts, blocks, swept):
     predicted = r + np.einsum("kmi,ki->km", Jv, v)
     cost = np.sum(predicted**2, axis=1)
     order = np.argsort(cost)
-    if swept:
+    if mode == "sweep":
         sweep = cost.reshape(-1, SWEEP_STEPS)
         minima = (sweep <= np.roll(sweep, 1, axis=1)) & (sweep <= np.roll(sweep, -1, axis=1))
         chosen = [k for k in order if minima.reshape(-1)[k]]
@@ -653,7 +734,7 @@ def _best_starts(problem, starts, blocks, swept):
         chosen = [k for k in order if np.sum(block[order[: list(order).index(k)]] == block[k]) < UNSWEPT_PER_BLOCK]
     picked = set(chosen)
     ordered = chosen + [k for k in order if k not in picked]
-    return [(Rs[k], ts[k]) for k in ordered], len(chosen), swept
+    return [(Rs[k], ts[k]) for k in ordered], len(chosen), mode
 
 
 def covariance(jacobian, translation, sigma):
