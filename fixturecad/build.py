@@ -13,14 +13,20 @@ import tempfile
 from importlib import resources
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from fixturecad.errors import InputError
-from fixturecad.templates.base import DEFAULT_STL_TOLERANCE_MM, Template
+
+if TYPE_CHECKING:
+    from fixturecad.templates.base import Template
 
 SCHEMA_ID = "fixturecad.features/1"
 FILES = {"step": "fixture.step", "stl": "fixture.stl", "features": "features.json",
          "preview": "preview.png", "register": "register.py"}
 # Relative agreement required between the BREP volume and the analytic one.
 VOLUME_RELATIVE_TOLERANCE = 1e-6
+# Chord tolerance of the STL tessellation unless asked otherwise, and the accepted range, mm.
+DEFAULT_STL_TOLERANCE_MM = 0.01
 STL_TOLERANCE_RANGE_MM = (1e-4, 1.0)
 # Chord tolerance of the preview tessellation, as a fraction of the fixture size.
 PREVIEW_CHORD_FRACTION = 0.004
@@ -46,7 +52,7 @@ def check_stl_tolerance(value: float) -> float:
     return value
 
 
-def features_document(template: Template, stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM) -> dict:
+def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM) -> dict:
     """The features.json content of a template instance (no CAD needed)."""
     from importlib.metadata import version
 
@@ -68,12 +74,12 @@ def features_document(template: Template, stl_tolerance: float = DEFAULT_STL_TOL
     }
 
 
-def default_target(template: Template, out_root: Path | None = None) -> Path:
+def default_target(template: "Template", out_root: Path | None = None) -> Path:
     """``out/<template>-<short parameters>`` under the current directory (or ``out_root``)."""
     return (Path("out") if out_root is None else Path(out_root)) / template.slug()
 
 
-def build(template: Template, target: Path, force: bool = False,
+def build(template: "Template", target: Path, force: bool = False,
           stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM) -> Path:
     """Write the fixture folder ``target``; return it. InputError if it exists and not ``force``."""
     from fixturecad.sideprocess import SideProcess
@@ -96,7 +102,7 @@ def build(template: Template, target: Path, force: bool = False,
     return target
 
 
-def _write_all(template: Template, folder: Path, stl_tolerance: float, side) -> None:
+def _write_all(template: "Template", folder: Path, stl_tolerance: float, side) -> None:
     from fixturecad.brep import match_features
     from fixturecad.mesh import mesh_from_shape, triangulate, write_stl
 
@@ -135,7 +141,7 @@ def write_register_script(document: dict, path: Path) -> None:
     write_register_script(document, path)
 
 
-def _scene(template: Template, features, matches: dict, parts) -> dict:
+def _scene(template: "Template", features, matches: dict, parts) -> dict:
     """Preview data: tessellated faces tagged with their feature, labels, default touch plan."""
     import numpy as np
 

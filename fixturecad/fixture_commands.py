@@ -11,6 +11,7 @@ from typing import Annotated
 
 import typer
 
+from fixturecad.build import DEFAULT_STL_TOLERANCE_MM, STL_TOLERANCE_RANGE_MM
 from fixturecad.errors import InputError
 from fixturecad.output import Format, render
 
@@ -51,7 +52,9 @@ def build(
     out: Annotated[Path | None, typer.Option(help="Output folder [default: out/<template>-<parameters>].")] = None,
     force: Annotated[bool, typer.Option(help="Replace the output folder if it exists.")] = False,
     base: Annotated[bool, typer.Option(help="Fuse a mounting base (stem and plate) onto a non-sensing face.")] = False,
-    stl_tolerance: Annotated[float, typer.Option(help="STL chord tolerance, mm (1e-4 .. 1).")] = 0.01,
+    stl_tolerance: Annotated[float, typer.Option(
+        help=f"STL chord tolerance, mm ({STL_TOLERANCE_RANGE_MM[0]:g} .. {STL_TOLERANCE_RANGE_MM[1]:g}).")
+    ] = DEFAULT_STL_TOLERANCE_MM,
 ):
     """Build a fixture: fixture.step, fixture.stl, features.json, preview.png (and register.py).
 

@@ -31,8 +31,6 @@ from fixturecad.errors import InputError
 
 # Gap between a mounting base and the nearest sensing patch, mm.
 BASE_CLEARANCE_MM = 1.0
-# Chord tolerance of the STL tessellation unless asked otherwise, mm.
-DEFAULT_STL_TOLERANCE_MM = 0.01
 
 
 @dataclass(frozen=True)
@@ -47,9 +45,6 @@ class Param:
     help: str
     short: str  # letter used in output folder names, e.g. "r" -> quarter-sphere-r40
     limit_reason: str = ""  # why the range stops where it does, quoted when a value is refused
-
-    def describe(self) -> str:
-        return f"--{self.name} {self.unit} (default {_fmt(self.default)}, {_fmt(self.minimum)}..{_fmt(self.maximum)}): {self.help}"
 
 
 @dataclass
@@ -219,11 +214,6 @@ class Template:
         out = {param.name: self.values[param.name.replace("-", "_")] for param in self.PARAMS}
         out["base"] = self.base
         return out
-
-    @classmethod
-    def describe(cls) -> str:
-        return "\n".join([f"{cls.name}: {cls.title} [{cls.origin}]", f"  class {cls.contact_class}"] +
-                         [f"  {param.describe()}" for param in cls.PARAMS])
 
 
 def unit(vector) -> np.ndarray:
