@@ -321,3 +321,17 @@ def test_contact_type_of_point_touches():
     group = engine.point_touches(features["cylinder"], np.full((2, 3), 100.0), np.arange(2))
     assert group.ctype == ContactType.parse("P/F-C/M")
     assert engine.Problem([group]).size == 2
+
+
+def test_the_paper_plane_and_cylinder_steps_start_next_to_the_pose():
+    """Example Two: normal from 3 plane touches, axis on its cone from 4 cylinder touches, origin."""
+    features, entries = _plan("inclined-plane-cylinder", "default")
+    rng = np.random.default_rng(10)
+    for _ in range(5):
+        truth = _random_pose(rng)
+        touches, _ = engine.plan_touches(entries, truth)
+        problem = engine.Problem(engine.build_groups(features, touches))
+        starts = engine.plane_cylinder_starts(problem)
+        errors = [pose_errors(fixture2meas_from_rt(R, t), truth) for R, t in starts]
+        best = min(errors, key=lambda e: e[0])
+        assert best[0] < 0.1 and best[1] < np.radians(0.2)
