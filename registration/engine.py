@@ -794,13 +794,13 @@ def robust_flag(problem, solution):
 # ---------------------------------------------------------------- free motions
 
 
-def _feature_directions(problem, rotation):
-    """(description, unit direction in the measurement frame) of each touched feature."""
+def _feature_directions(problem, rotation, features=None):
+    """(description, unit direction in the measurement frame, feature): touched features first."""
     out = []
     seen = set()
-    for g in problem.groups:
-        f = g.feature
-        if f.id in seen:
+    listed = [g.feature for g in problem.groups] + list((features or {}).values())
+    for f in listed:
+        if f is None or f.id in seen:
             continue
         seen.add(f.id)
         if f.kind == "plane":
@@ -816,8 +816,12 @@ def _vec(v):
     return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
 
 
-def free_motions(problem, solution):
-    """Names of the motions the touches do not constrain, relative to the features."""
+def free_motions(problem, solution, features=None):
+    """Names of the motions the touches do not constrain, relative to the features.
+
+    Directions are matched with the touched features first, then with the
+    other ``features`` (dict id -> feature) of the fixture.
+    """
     length = problem.scale()
     D = np.array([length] * 3 + [1.0] * 3)
     scaled = solution.jacobian / D
@@ -827,7 +831,7 @@ def free_motions(problem, solution):
     if null.shape[1] == 0:
         return []
     R, t = solution.rotation, solution.translation
-    directions = _feature_directions(problem, R)
+    directions = _feature_directions(problem, R, features)
     names = []
     # Pure translations: the null space of the rotation part within the null space.
     _, sw, vw = np.linalg.svd(null[:3], full_matrices=True)
@@ -839,7 +843,13 @@ def free_motions(problem, solution):
         if T_dirs.shape[1] == 1:
             u = T_dirs[:, 0]
             match = [name for name, d, _ in directions if abs(d @ u) > 0.999]
-            names.append("translation along " + (match[0] if match else _vec(u)))
+            planes = [(f.id, d) for _, d, f in directions if f.kind == "plane"]
+            match += [f"both {a} and {b}" for i, (a, da) in enumerate(planes) for b, db in planes[i + 1:]
+                      if abs(da @ u) < 1e-3 and abs(db @ u) < 1e-3 and abs(da @ db) < 0.999]
+            if match and match[0].startswith("both "):
+                names.append("translation parallel to " + match[0])
+            else:
+                names.append("translation along " + (match[0] if match else _vec(u)))
         elif T_dirs.shape[1] == 2:
             n = np.cross(T_dirs[:, 0], T_dirs[:, 1])
             match = [f.id for name, d, f in directions if f.kind == "plane" and abs(d @ n) > 0.999]
@@ -889,7 +899,13 @@ def free_motions(problem, solution):
         for k in range(omega_basis.shape[1]):
             w = omega_basis[:, k]
             label = None
-            for g in problem.groups:
+            spheres = [g.feature for g in problem.groups if getattr(g.feature, "kind", None) == "sphere"]
+            for i, a in enumerate(spheres):
+                for b in spheres[i + 1:]:
+                    centres = np.array([R @ a.center + t, R @ b.center + t])
+                    if label is None and on_axis(centres, w):
+                        label = f"the line through the centres of {a.id} and {b.id}"
+            for g in problem.groups if label is None else ():
                 if getattr(g.feature, "kind", None) == "sphere":
                     c = R @ g.feature.center + t
                     if on_axis(c[None], w):
@@ -1031,7 +1047,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
     if best.rank < 6:
         status = "underdetermined"
-        result["free_motions"] = free_motions(problem, best)
+        result["free_motions"] = free_motions(problem, best, features)
     elif len(good) == 1:
         status = "unique"
         best = good[0]

@@ -335,3 +335,25 @@ def test_the_paper_plane_and_cylinder_steps_start_next_to_the_pose():
         errors = [pose_errors(fixture2meas_from_rt(R, t), truth) for R, t in starts]
         best = min(errors, key=lambda e: e[1])
         assert best[0] < 0.1 and best[1] < np.radians(0.2)
+
+
+@pytest.mark.parametrize(
+    "name,plan,left_out,motions",
+    [
+        ("inclined-plane-cylinder", "default", ["plane"],
+         ["translation along the axis of cylinder", "rotation about the axis of cylinder"]),
+        ("quarter-sphere", "point-probe", ["flat_b", "sphere"],
+         ["translation in the plane of flat_a", "rotation about the normal of flat_a"]),
+        ("sphere-plate", "default", ["ball_3"], ["rotation about the line through the centres of ball_1 and ball_2"]),
+        ("cube", "default", ["left"], ["translation along the normal of left"]),
+    ],
+)
+def test_free_motions_are_named_after_the_features(name, plan, left_out, motions):
+    features, entries = _plan(name, plan)
+    truth = _random_pose(np.random.default_rng(13))
+    touches, _ = engine.plan_touches(entries, truth)
+    for feature_id in left_out:
+        touches.pop(feature_id)
+    result = engine.register_touches(features, touches)
+    assert result["status"] == "underdetermined"
+    assert result["free_motions"] == motions
