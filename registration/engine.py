@@ -1036,6 +1036,19 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     contacts : list of dict, touches of other contact types (see ``contact_touch``)
     approaches : dict id -> array-like, shape (n, 3), optional probe approach directions;
         a pose at which a probe would have touched a surface from inside is rejected
+
+    Returns
+    -------
+    dict with ``pose`` (4x4 nested list, fixture2meas), ``status`` ("unique",
+    "ambiguous", "inconsistent" or "underdetermined"), ``rms_residual_mm``,
+    ``solutions`` (each ``pose``, ``rms_residual_mm``; every admissible pose that
+    passes the chi-square test, best first), ``covariance`` (6x6 over rotation
+    vector rad and fixture origin mm, None when underdetermined),
+    ``sigma_translation_mm``, ``sigma_rotation_deg``, ``free_motions`` (names),
+    ``separating_touch`` (ambiguous: where one more touch tells the candidates
+    apart), ``flagged`` (inconsistent: the touch left out, e.g. mislabelled),
+    ``inadmissible`` (touches off their patch or touched from inside at
+    ``pose``), ``touches``, ``rows``, ``rank``.
     """
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
     problem = Problem(groups, sigma_mm)
