@@ -162,8 +162,7 @@ def _scene(template: "Template", features, matches: dict, parts) -> dict:
     for entry in plan.touches:
         for point in entry["points"]:
             number += 1
-            feature = by_id[entry["feature"]]
-            normal = None if feature.kind in ("line", "point") else feature.normal_at(point)[0]
+            normal = _label_normal(by_id[entry["feature"]], np.array(point), features)
             touches.append({"point": np.array(point), "normal": normal, "label": str(number),
                             "text": f"{number:>2} {entry['contact']:<10} {entry['feature']}"})
             anchors.setdefault(entry["feature"], []).append(point)
@@ -187,7 +186,26 @@ def _scene(template: "Template", features, matches: dict, parts) -> dict:
     title = (f"{template.name} ({parameters}{', base' if template.base else ''}): {template.contact_class}"
              f" - default plan, {number} touches")
     views = tuple(view_from_direction(d) for d in template.VIEW_DIRECTIONS)
-    return scene(title, faces, feature_rows, touches, views)
+    label_normals = {row["id"]: row["normal"] for row in feature_rows}
+    sensors = [{**_sensor_drawing(entry["sensor"], 0.35 * _span(parts)), "normal": label_normals[entry["feature"]]}
+               for entry in plan.touches if "sensor" in entry]
+    return scene(title, faces, feature_rows, touches, views, sensors)
+
+
+def _sensor_drawing(sensor: dict, size: float) -> dict:
+    """A non-point sensor of the plan as something to draw: a square of the plane or a segment of the line."""
+    import numpy as np
+
+    point = np.array(sensor["point"])
+    if sensor["kind"] == "line":
+        d = np.array(sensor["direction"])
+        return {"kind": "line", "points": np.array([point - size * d, point + size * d])}
+    n = np.array(sensor["normal"])
+    a = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    corners = [point + size / 2 * (sa * a + sb * b) for sa, sb in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    return {"kind": "plane", "points": np.array(corners)}
 
 
 def _label_normal(feature, anchor, features):

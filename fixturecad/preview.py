@@ -10,6 +10,8 @@ import numpy as np
 FEATURE_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf")
 INERT_COLOUR = "#c8c8c8"
 TOUCH_COLOUR = "#111111"
+SENSOR_COLOUR = "#444444"
+SUBDIVISION = 15  # triangles longer than size / this are split, so depth sorting works on big flat faces
 VIEWS = ((28.0, -60.0), (-28.0, 120.0))  # (elevation, azimuth) deg: front-top and back-bottom
 
 
@@ -19,16 +21,18 @@ def view_from_direction(direction) -> tuple:
     return float(np.degrees(np.arcsin(z))), float(np.degrees(np.arctan2(y, x)))
 
 
-def scene(title: str, faces: list, features: list, touches: list, views=VIEWS) -> dict:
+def scene(title: str, faces: list, features: list, touches: list, views=VIEWS, sensors=()) -> dict:
     """The data a preview needs, plain numpy.
 
     faces: ``[(vertices (n, 3), triangles (m, 3), feature id or None)]``;
     features: ``[{"id", "kind", "element", "anchor" (3,), "normal" (3,) or None, "segment" ((2, 3) for
     lines or None)}]``; touches: ``[{"point" (3,), "normal" (3,) or None, "label" str, "text" str}]``;
-    views: two (elevation, azimuth). Labels and touches whose outward normal faces away from a view
+    views: two (elevation, azimuth); sensors: ``[{"kind": "plane" | "line", "points" (4, 3) or (2, 3)}]``,
+    the plane and line sensors of the plan, each with the "normal" of its feature for hiding. Labels and touches whose outward normal faces away from a view
     are left out of it (matplotlib would draw them through the solid).
     """
-    return {"title": title, "faces": faces, "features": features, "touches": touches, "views": views}
+    return {"title": title, "faces": faces, "features": features, "touches": touches, "views": views,
+            "sensors": list(sensors)}
 
 
 def render(data: dict, path) -> None:
@@ -43,6 +47,7 @@ def render(data: dict, path) -> None:
     all_points = np.vstack([v for v, _, _ in data["faces"]])
     low, high = all_points.min(axis=0), all_points.max(axis=0)
     centre, half = (low + high) / 2, (high - low).max() / 2 * 1.05
+    max_edge = (high - low).max() / SUBDIVISION
     light = np.array([0.4, -0.5, 0.75]) / np.linalg.norm([0.4, -0.5, 0.75])
 
     figure = Figure(figsize=(13, 6.5), dpi=100)
@@ -56,16 +61,23 @@ def render(data: dict, path) -> None:
             """Labels on faces turned away from this view would show through: leave them out."""
             return normal is None or float(np.dot(normal, camera)) > 0.05
 
+        # one collection, so matplotlib depth-sorts every triangle against every other; what is
+        # drawn after it (sensors, edges, touches, labels) goes on top
+        ax.computed_zorder = False
+        all_tris, all_colours = [], []
         for vertices, triangles, feature_id in data["faces"]:
-            tris = vertices[triangles]
+            tris = _subdivide(vertices[triangles], max_edge)
             normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
             normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
             shade = 0.55 + 0.45 * np.abs(normals @ light)
             base = np.array(_rgb(colours.get(feature_id, INERT_COLOUR)))
-            face_colours = np.clip(base[None, :] * shade[:, None], 0, 1)
-            ax.add_collection3d(Poly3DCollection(tris, facecolors=face_colours, edgecolors="none", alpha=1.0))
+            all_tris.append(tris)
+            all_colours.append(np.clip(base[None, :] * shade[:, None], 0, 1))
+        face_colours = np.concatenate(all_colours)  # edges in the face colour close antialiasing seams
+        ax.add_collection3d(Poly3DCollection(np.concatenate(all_tris), facecolors=face_colours,
+                                             edgecolors=face_colours, linewidths=0.3, zorder=1))
         for feature in data["features"]:
-            if feature.get("segment") is not None:
+            if feature.get("segment") is not None and seen(feature.get("normal")):
                 seg = np.asarray(feature["segment"])
                 ax.plot(seg[:, 0], seg[:, 1], seg[:, 2], color=colours[feature["id"]], linewidth=4, zorder=5)
             anchor = np.asarray(feature["anchor"])
@@ -73,6 +85,15 @@ def render(data: dict, path) -> None:
                 continue
             ax.text(*anchor, f" {feature['id']} ({feature['element']})", color=colours[feature["id"]],
                     fontsize=9, fontweight="bold", zorder=10)
+        for sensor in data.get("sensors", []):
+            if not seen(sensor.get("normal")):
+                continue
+            points = np.asarray(sensor["points"])
+            if sensor["kind"] == "plane":
+                ax.add_collection3d(Poly3DCollection([points], facecolors=(0.1, 0.1, 0.1, 0.18),
+                                                     edgecolors=SENSOR_COLOUR, linestyles="dashed"))
+            else:
+                ax.plot(points[:, 0], points[:, 1], points[:, 2], color=SENSOR_COLOUR, linestyle="--", linewidth=1.5)
         visible = [t for t in data["touches"] if seen(t.get("normal"))]
         if visible:
             points = np.array([t["point"] for t in visible])
@@ -87,9 +108,10 @@ def render(data: dict, path) -> None:
         ax.set_ylabel("Y mm")
         ax.set_zlabel("Z mm")
         ax.view_init(elev=elev, azim=azim)
-        ax.set_title(f"view from elevation {elev:.0f}, azimuth {azim:.0f} deg", fontsize=9)
     handles = [Patch(color=colours[f["id"]], label=f"{f['id']}: {f['kind']} ({f['element']})") for f in data["features"]]
     handles.append(Line2D([], [], marker="o", linestyle="", color=TOUCH_COLOUR, label="touch of the default plan"))
+    if data.get("sensors"):
+        handles.append(Line2D([], [], linestyle="--", color=SENSOR_COLOUR, label="plane / line sensor"))
     if data["touches"]:
         listing = "default touch plan\n" + "\n".join(t["text"] for t in data["touches"])
         figure.text(0.5, 0.88, listing, ha="center", va="top", multialignment="left", fontsize=8, family="monospace",
@@ -98,6 +120,23 @@ def render(data: dict, path) -> None:
     figure.suptitle(data["title"], fontsize=11)
     figure.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.1, wspace=0.05)
     figure.savefig(path)
+
+
+def _subdivide(tris, max_edge: float, levels: int = 5):
+    """Split triangles (m, 3, 3) into four at their edge midpoints until no edge exceeds ``max_edge``."""
+    for _ in range(levels):
+        edges = np.linalg.norm(tris - np.roll(tris, 1, axis=1), axis=2).max(axis=1)
+        big = edges > max_edge
+        if not big.any():
+            break
+        t = tris[big]
+        m01, m12, m20 = (t[:, 0] + t[:, 1]) / 2, (t[:, 1] + t[:, 2]) / 2, (t[:, 2] + t[:, 0]) / 2
+        split = np.concatenate([
+            np.stack([t[:, 0], m01, m20], axis=1), np.stack([m01, t[:, 1], m12], axis=1),
+            np.stack([m20, m12, t[:, 2]], axis=1), np.stack([m01, m12, m20], axis=1),
+        ])
+        tris = np.concatenate([tris[~big], split])
+    return tris
 
 
 def _rgb(colour: str):

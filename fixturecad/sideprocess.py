@@ -50,8 +50,18 @@ def _warm_imports() -> None:
     import matplotlib
 
     matplotlib.use("Agg")
-    from matplotlib.backends import backend_agg  # noqa: F401
-    from mpl_toolkits.mplot3d import Axes3D  # noqa: F401
+    import io
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    # a throw-away drawing loads fonts and the 3D machinery while the parent is busy
+    figure = Figure(figsize=(1, 1), dpi=20)
+    FigureCanvasAgg(figure)
+    axes = figure.add_subplot(projection="3d")
+    axes.text(0, 0, 0, "x", fontweight="bold")
+    axes.set_xlabel("x")
+    figure.savefig(io.BytesIO(), format="png")
 
     try:
         import fixturecad.registration.generate  # noqa: F401
