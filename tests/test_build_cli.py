@@ -41,6 +41,12 @@ def test_build_writes_the_four_files(built, name):
         assert (folder / file).stat().st_size > 0, file
     assert (folder / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not list(folder.parent.glob(".*tmp")), "staging folders left behind"
+    assert not list(folder.glob(".*")), "scratch files left in the folder"
+    try:
+        import fixturecad.registration.generate  # noqa: F401
+    except ModuleNotFoundError:
+        return
+    assert "def " in (folder / "register.py").read_text()
 
 
 @pytest.mark.parametrize("name", list(TEMPLATES))
@@ -76,6 +82,7 @@ def test_step_reimports_as_one_solid_with_the_same_volume(built, name):
     assert ".MILLI." in text
     shape = cq.importers.importStep(str(built[name] / "fixture.step")).val()
     assert len(shape.Solids()) == 1 and shape.isValid()
+    assert all(shell.Closed() for shell in shape.Shells())
     assert shape.Volume() == pytest.approx(make(name).volume(), rel=1e-6)
 
 
@@ -177,6 +184,13 @@ def test_suggest_goes_from_class_to_a_buildable_design(capsys, text, template):
     assert f"fixturecad build {template}" in out
 
 
+def test_help_lists_the_fixture_commands():
+    result = run("--help")
+    assert result.returncode == 0
+    for command in ("build", "templates", "suggest"):
+        assert command in result.stdout
+
+
 def test_cli_help_does_not_import_cadquery():
     code = "import sys, fixturecad.cli; assert 'cadquery' not in sys.modules and 'matplotlib' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)
@@ -208,3 +222,16 @@ def test_a_failed_forced_build_keeps_the_old_folder(tmp_path, monkeypatch):
         build(make("cube", size=12), target, force=True)
     assert (target / "features.json").read_text() == before
     assert [p.name for p in tmp_path.iterdir()] == ["cube"]
+
+
+def test_the_commands_in_docs_fixtures_md_run(tmp_path):
+    import shlex
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parent.parent / "docs" / "fixtures.md").read_text()
+    commands = [line[len("$ fixturecad "):] for line in text.splitlines() if line.startswith("$ fixturecad ")]
+    assert commands
+    for command in commands:
+        result = run(*shlex.split(command), cwd=tmp_path)
+        assert result.returncode == 0, (command, result.stderr)
+    assert (tmp_path / "out" / "quarter-sphere-r40" / "fixture.step").exists()
