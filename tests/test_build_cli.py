@@ -235,3 +235,15 @@ def test_the_commands_in_docs_fixtures_md_run(tmp_path):
         result = run(*shlex.split(command), cwd=tmp_path)
         assert result.returncode == 0, (command, result.stderr)
     assert (tmp_path / "out" / "quarter-sphere-r40" / "fixture.step").exists()
+
+
+def test_template_options_parse_both_spellings_and_refuse_repeats():
+    from fixturecad.errors import InputError
+    from fixturecad.fixture_commands import parse_template_options
+
+    assert parse_template_options("inclined-plane-cylinder", ["--radius=20", "--angle", "30"]) == {
+        "radius": "20", "angle": "30"}
+    assert parse_template_options("cube", ["--size", "-3"]) == {"size": "-3"}  # refused later, by range
+    for args, word in ((["--size", "1", "--size", "2"], "twice"), (["50"], "unexpected"), (["--size"], "value")):
+        with pytest.raises(InputError, match=word):
+            parse_template_options("cube", args)
