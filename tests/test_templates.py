@@ -218,3 +218,42 @@ def test_slug_names_the_parameters():
     assert make("cube", size=50).slug() == "cube-s50"
     assert make("inclined-plane-cylinder", radius=20, angle=30).slug() == "inclined-plane-cylinder-r20-a30"
     assert make("quarter-sphere", base=True, radius=12.5).slug() == "quarter-sphere-r12.5-base"
+
+
+def _random_instances(count_per_template: int, seed: int):
+    """Seeded random valid parameter sets across each template's ranges (with and without base)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for name, cls in TEMPLATES.items():
+        found = 0
+        while found < count_per_template:
+            values = {}
+            for p in cls.PARAMS:
+                if p.unit == "mm":
+                    values[p.name] = float(np.exp(rng.uniform(np.log(p.minimum), np.log(min(p.maximum, 50 * p.minimum)))))
+                else:
+                    values[p.name] = float(rng.uniform(p.minimum, p.maximum))
+            try:
+                cls(base=bool(found % 2), **values)
+            except InputError:
+                continue
+            out.append((name, bool(found % 2), values))
+            found += 1
+    return out
+
+
+@pytest.mark.parametrize("name, base, values", _random_instances(2, seed=516))
+def test_random_valid_parameters_give_valid_solids_meshes_and_plans(name, base, values):
+    from fixturecad.mesh import mesh_from_shape, mesh_volume
+
+    fixture = make(name, base=base, **values)
+    solid = fixture.solid()
+    assert solid.isValid() and len(solid.Solids()) == 1
+    assert solid.Volume() == pytest.approx(fixture.volume(), rel=1e-6)
+    match_features(solid, fixture.features())
+    vertices, faces = mesh_from_shape(solid, 0.01)
+    assert mesh_volume(vertices, faces) == pytest.approx(fixture.volume(), rel=1e-2)
+    features = fixture.feature_map()
+    for plan in fixture.touch_plans().values():
+        for entry in plan.touches:
+            assert features[entry["feature"]].contains(entry["points"]).all()
