@@ -55,8 +55,6 @@ NEAR_KNOWN_RAD = 1e-3  # a refinement this close to a found solution is convergi
 NEAR_KNOWN_MM = 0.05
 SAME_POSE_TRANSLATION_MM = 1e-3
 RANK_TOLERANCE = 1e-7  # singular values below this fraction of the largest count as zero
-POINT_CONTACT = "P/F"
-SENSOR_KIND = {"plane": "PL", "sphere": "S", "cylinder": "C", "line": "L", "point": "P"}
 
 
 @dataclass
@@ -103,7 +101,7 @@ def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
     """Point-probe touches (ball radius 0) or ball-tip centres on a feature."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = len(points)
-    fixture_element = SENSOR_KIND[feature.kind]
+    fixture_element = feature.element
     fixture_fixed = feature.kind == "point"
     if ball_radius_mm > 0.0:
         ctype = ContactType("S", False, fixture_element, fixture_fixed)
@@ -160,7 +158,7 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=0.0, fixt
     fixture-frame keys of a fixed fixture side (its known contact point ``o``).
     """
     ctype = ContactType.parse(contact)
-    if ctype.fixture != SENSOR_KIND[feature.kind]:
+    if ctype.fixture != feature.element:
         raise ValueError(
             f"contact {contact} touches a {ctype.fixture} element but feature {feature.id} is a {feature.kind}"
         )

@@ -90,14 +90,6 @@ def apply_twist(rotation, translation, twist):
     return E @ rotation, E @ translation + twist[3:]
 
 
-def twist_between(fixture2meas_a, fixture2meas_b):
-    """The spatial twist (6,) that moves pose a onto pose b (exactly, not to first order)."""
-    Ra, ta = fixture2meas_a[:3, :3], fixture2meas_a[:3, 3]
-    Rb, tb = fixture2meas_b[:3, :3], fixture2meas_b[:3, 3]
-    E = Rb @ Ra.T
-    return np.concatenate([vector_from_rotation(E), tb - E @ ta])
-
-
 def origin_error_map(translation):
     """Matrix (6, 6) mapping a twist (omega, v) to (omega, change of the fixture origin).
 
