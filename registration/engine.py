@@ -37,11 +37,13 @@ from .pose import (
     rotation_angle,
     rotation_from_vector,
     random_rotation,
+    skew,
 )
 
 DEFAULT_SIGMA_MM = 0.005  # touch noise standard deviation assumed by the chi-square test
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
+EXTENT_SIGMAS = 3.0  # ... plus this many standard deviations of the touch's position under the pose
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
 PLANE_CYLINDER_STEPS = 180  # axis directions tried on the cone about the plane normal
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
@@ -624,19 +626,35 @@ def chi_square_passes(cost, rows, rank, sigma):
     return cost / sigma**2 <= chi_square_quantile(CHI2_CONFIDENCE, dof)
 
 
-def inadmissible(problem, rotation, translation, tolerance=EXTENT_TOLERANCE_MM):
+def inadmissible(problem, rotation, translation, jacobian=None, tolerance=EXTENT_TOLERANCE_MM):
     """Touch indices that cannot have happened at this pose.
 
     A touch is inadmissible when its contact, mapped into the fixture frame,
     lies off the feature's finite patch, or when the probe's approach
-    direction (if known) points along the outward surface normal there.
+    direction (if known) points along the outward surface normal there. With
+    the Jacobian, the patch is widened by three standard deviations of where
+    the pose puts each touch, so a poorly determined pose is not refused for
+    its own uncertainty.
     """
+    twist_cov = None
+    if jacobian is not None:
+        F = jacobian.T @ jacobian
+        if np.linalg.cond(F) < 1e14:
+            twist_cov = problem.sigma**2 * np.linalg.inv(F)
     bad = set()
     for g in problem.groups:
         if g.points is None:
             continue
         local = (g.points - translation) @ rotation
-        inside = np.asarray(g.feature.contains(local, tolerance))
+        slack = tolerance
+        if twist_cov is not None:
+            # A spatial twist moves the touch's fixture point p by omega x p + v.
+            spread = np.zeros(len(g.points))
+            for k, point in enumerate(g.points):
+                J = np.hstack([-skew(point), np.eye(3)])
+                spread[k] = np.sqrt(max(np.trace(J @ twist_cov @ J.T), 0.0))
+            slack = tolerance + EXTENT_SIGMAS * spread
+        inside = np.asarray(g.feature.contains(local, slack))
         bad.update(int(i) for i in g.index[~inside])
         if g.approach is not None and g.feature.kind in ("plane", "sphere", "cylinder"):
             outward = g.feature.normal_at(local) @ rotation.T
@@ -696,7 +714,7 @@ def _judged(problem, candidate, length):
     """A solution with its rank, residual test and extent check filled in."""
     candidate.rank = jacobian_rank(candidate.jacobian, length)
     candidate.passes = chi_square_passes(candidate.cost, len(candidate.residuals), candidate.rank, problem.sigma)
-    candidate.outside = inadmissible(problem, candidate.rotation, candidate.translation)
+    candidate.outside = inadmissible(problem, candidate.rotation, candidate.translation, candidate.jacobian)
     candidate.admissible = not candidate.outside
     return candidate
 
