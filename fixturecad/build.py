@@ -12,7 +12,6 @@ import shutil
 import tempfile
 from importlib import resources
 from pathlib import Path
-
 from typing import TYPE_CHECKING
 
 from fixturecad.errors import InputError
@@ -133,12 +132,12 @@ def write_register_script(document: dict, path: Path) -> None:
     # --- register.py hook: the generator belongs to the registration layer. ---
     # While fixturecad.registration.generate is absent the build skips it.
     try:
-        from fixturecad.registration.generate import write_register_script
+        from fixturecad.registration.generate import write_register_script as generate
     except ModuleNotFoundError as error:
         if error.name != "fixturecad.registration.generate":
             raise
         return
-    write_register_script(document, path)
+    generate(document, path)
 
 
 def _scene(template: "Template", features, matches: dict, parts) -> dict:

@@ -261,7 +261,6 @@ class Plane(_Feature):
         return np.tile(self.normal, (len(check_points(points)), 1))
 
 
-
 @dataclass
 class Sphere(_Feature):
     """A convex spherical face: ``center``, ``radius`` mm; material inside."""
@@ -288,7 +287,6 @@ class Sphere(_Feature):
 
     def closest_point(self, points):
         return self.center + self.radius * self.normal_at(points)
-
 
 
 @dataclass
@@ -324,7 +322,6 @@ class Cylinder(_Axial):
         return points - self._radial(points) + self.radius * self.normal_at(points)
 
 
-
 @dataclass
 class Line(_Axial):
     """An edge: through ``point`` along unit ``direction``; ``signed_distance`` is unsigned."""
@@ -357,7 +354,6 @@ class Line(_Axial):
         return points - self._radial(points)
 
 
-
 @dataclass
 class Point(_Feature):
     """A point element (e.g. a vertex or a probe-able tip): no extent beyond itself."""
@@ -380,7 +376,6 @@ class Point(_Feature):
 
     def closest_point(self, points):
         return np.tile(self.point, (len(check_points(points)), 1))
-
 
 
 # ``normal`` is the geometry attribute of a plane (its unit normal), so the
