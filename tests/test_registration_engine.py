@@ -196,8 +196,8 @@ def _ball_block():
     ]}
 
 
-def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
-    features = _ball_block()
+def _too_little_plan():
+    """Three touches on a ring of the ball (3 mm above its centre), three on the block's faces."""
     angles = np.radians([20.0, 140.0, 260.0])
     ring = np.sqrt(100.0 - 9.0)
     plan = {
@@ -205,6 +205,11 @@ def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
         "front": np.array([[10.0, 0, 15], [-30, 0, 50]]),
         "side": np.array([[-50.0, 20, 10]]),
     }
+    return plan
+
+
+def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
+    features, plan = _ball_block(), _too_little_plan()
     rng = np.random.default_rng(0)
     for _ in range(5):
         truth = _random_pose(rng)
@@ -229,14 +234,7 @@ def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
 
 def test_the_probe_approach_rules_out_the_mirror():
     """Touching the ball from above: the mirrored pose would have the probe touch from inside."""
-    features = _ball_block()
-    angles = np.radians([20.0, 140.0, 260.0])
-    ring = np.sqrt(100.0 - 9.0)
-    plan = {
-        "ball": np.c_[ring * np.cos(angles), ring * np.sin(angles), np.full(3, 33.0)],
-        "front": np.array([[10.0, 0, 15], [-30, 0, 50]]),
-        "side": np.array([[-50.0, 20, 10]]),
-    }
+    features, plan = _ball_block(), _too_little_plan()
     truth = _random_pose(np.random.default_rng(1))
     touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in plan.items()}
     down = np.tile(truth[:3, :3] @ [0.0, 0.0, -1.0], (3, 1))
