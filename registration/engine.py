@@ -968,20 +968,26 @@ def _patch_samples(feature, count=400, seed=0):
 
 
 def separating_touch(features, solutions):
-    """The point touch that best tells the first two candidate poses apart."""
+    """The point touch that best tells the best candidate pose from all the others.
+
+    Over points on every feature's patch, the touch the best candidate
+    predicts (``point_meas_mm``) is scored by how far it would lie off that
+    feature under each other candidate; the smallest of these distances is
+    maximised (``separation_mm``).
+    """
     if len(solutions) < 2:
         return None
-    a, b = solutions[0], solutions[1]
+    a, others = solutions[0], solutions[1:]
     best = None
     for feature in features.values():
-        if not hasattr(feature, "signed_distance"):
-            continue
         pts = _patch_samples(feature)
         if not len(pts):
             continue
         meas = pts @ a.rotation.T + a.translation
-        local_b = (meas - b.translation) @ b.rotation
-        gap = np.abs(feature.signed_distance(local_b))
+        gap = np.full(len(pts), np.inf)
+        for b in others:
+            local_b = (meas - b.translation) @ b.rotation
+            gap = np.minimum(gap, np.abs(feature.signed_distance(local_b)))
         k = int(np.argmax(gap))
         if best is None or gap[k] > best["separation_mm"]:
             best = {
