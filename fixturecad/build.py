@@ -129,14 +129,8 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, side) -
 
 def write_register_script(document: dict, path: Path) -> None:
     """register.py beside features.json (run in the side process)."""
-    # --- register.py hook: the generator belongs to the registration layer. ---
-    # While fixturecad.registration.generate is absent the build skips it.
-    try:
-        from fixturecad.registration.generate import write_register_script as generate
-    except ModuleNotFoundError as error:
-        if error.name != "fixturecad.registration.generate":
-            raise
-        return
+    from fixturecad.registration.generate import write_register_script as generate
+
     generate(document, path)
 
 

@@ -10,6 +10,8 @@ import sys
 import typer
 
 from fixturecad.errors import InputError
+from fixturecad.fixture_commands import app as fixture_app
+from fixturecad.registration_commands import app as registration_app
 from fixturecad.theory.commands import app as theory_app
 
 app = typer.Typer(
@@ -19,24 +21,8 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-app.add_typer(theory_app)
-
-
-def _register_optional_groups() -> None:
-    """Command groups of the fixture and registration layers, if present."""
-    from importlib import import_module
-
-    for module in ("fixturecad.fixture_commands", "fixturecad.registration_commands"):
-        try:
-            group = import_module(module)
-        except ModuleNotFoundError as error:
-            if error.name != module:
-                raise
-            continue
-        app.add_typer(group.app)
-
-
-_register_optional_groups()
+for group in (theory_app, fixture_app, registration_app):
+    app.add_typer(group)
 
 
 def fail(message: str) -> None:

@@ -56,7 +56,7 @@ def build(
         help=f"STL chord tolerance, mm ({STL_TOLERANCE_RANGE_MM[0]:g} .. {STL_TOLERANCE_RANGE_MM[1]:g}).")
     ] = DEFAULT_STL_TOLERANCE_MM,
 ):
-    """Build a fixture: fixture.step, fixture.stl, features.json, preview.png (and register.py).
+    """Build a fixture: fixture.step, fixture.stl, features.json, preview.png and a standalone register.py.
 
     Template parameters follow as options, e.g. `fixturecad build quarter-sphere --radius 40`.
     """

@@ -63,10 +63,7 @@ def _warm_imports() -> None:
     axes.set_xlabel("x")
     figure.savefig(io.BytesIO(), format="png")
 
-    try:
-        import fixturecad.registration.generate  # noqa: F401
-    except ModuleNotFoundError:
-        pass
+    import fixturecad.registration.generate  # noqa: F401
 
 
 def _main() -> None:
