@@ -152,12 +152,16 @@ def sensor_geometry(ctype, sensor, contact_point=None):
     return geometry
 
 
-def contact_touch(feature, contact: str, sensor: dict, index: int, rho=0.0, fixture=None,
+def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fixture=None,
                   contact_point=None) -> TouchGroup:
     """One touch of any contact type: the sensor element's geometry in the measurement frame.
 
     ``sensor`` see :func:`sensor_geometry`; ``fixture`` optional extra
     fixture-frame keys of a fixed fixture side (its known contact point ``o``).
+    ``rho`` (mm) defaults to the sum of the radii of the two elements, the
+    offset of two convex elements touching from outside (a ball tip on a
+    plane: its radius; on a sphere: both radii; a plane sensor on a cylinder:
+    the cylinder's radius).
     """
     ctype = ContactType.parse(contact)
     if ctype.fixture != feature.element:
@@ -170,10 +174,9 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=0.0, fixt
     if ctype.fixture_fixed and "o" in extra and "u" not in extra and feature.kind in ("plane", "sphere", "cylinder"):
         extra["u"] = feature.normal_at(extra["o"])[0]
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
-    group = TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]))
-    values, _ = residuals_and_jacobian(ctype, side, fside, np.eye(3), np.zeros(3), group.rho)
-    group.rows = values.shape[1]
-    return group
+    if rho is None:
+        rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(getattr(feature, "radius", 0.0))
+    return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]))
 
 
 class Problem:
@@ -1037,7 +1040,7 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=
         groups.append(
             contact_touch(
                 features[feature_id], contact["contact"], contact["sensor"], index,
-                contact.get("rho", 0.0), contact.get("fixture"), contact.get("point"),
+                contact.get("rho"), contact.get("fixture"), contact.get("point"),
             )
         )
         index += 1
@@ -1145,7 +1148,9 @@ def plan_touches(entries, fixture2meas):
                 elif key != "kind":
                     sensor[key] = value
             contact = {"feature": entry["feature"], "contact": entry["contact"], "sensor": sensor,
-                       "point": (R @ point + t).tolist(), "rho": float(entry.get("rho", 0.0))}
+                       "point": (R @ point + t).tolist()}
+            if entry.get("rho") is not None:
+                contact["rho"] = float(entry["rho"])
             if ctype.fixture_fixed:
                 contact["fixture"] = {"o": point.tolist()}
             contacts.append(contact)

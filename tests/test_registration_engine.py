@@ -355,3 +355,23 @@ def test_free_motions_are_named_after_the_features(name, plan, left_out, motions
     result = engine.register_touches(features, touches)
     assert result["status"] == "underdetermined"
     assert result["free_motions"] == motions
+
+
+def test_a_ball_tip_contact_mixes_with_point_touches():
+    """S/M-PL/M and S/M-S/M touches from a touch file: the offset defaults to the radii."""
+    features, entries = _plan("quarter-sphere", "point-probe")
+    truth = _random_pose(np.random.default_rng(14))
+    touches, _ = engine.plan_touches(entries, truth)
+    ball = 1.5
+    contacts = []
+    for feature_id in ("flat_b", "sphere"):
+        feature = features[feature_id]
+        local = np.asarray([e for e in entries if e["feature"] == feature_id][0]["points"][0], float)
+        centre = local + ball * feature.normal_at(local)[0]
+        contacts.append({"feature": feature_id, "contact": f"S/M-{feature.element}/M",
+                         "sensor": {"kind": "sphere", "center": (truth[:3, :3] @ centre + truth[:3, 3]).tolist(),
+                                    "radius": ball}})
+        touches[feature_id] = touches[feature_id][1:]
+    result = engine.register_touches(features, touches, contacts=contacts)
+    assert result["status"] == "unique"
+    assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
