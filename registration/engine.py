@@ -4,12 +4,15 @@ A touch plan is a list of :class:`TouchGroup`: touches of one contact type on
 one feature. Their residuals and twist Jacobians come from the contact model
 (:mod:`.contacts`); nothing here re-derives contact geometry. The engine
 
-1. initialises without a pose: the plane of three or more touches (closed
-   form) fixes one direction, a sweep about it with the translation solved by
-   Gauss-Newton (closed form from a sphere centre when one is touched) seeds
-   Levenberg-Marquardt; a nominal pose seeds it directly;
+1. initialises without a pose, from closed forms: a plane and a cylinder by
+   the paper's Example Two steps; three or more sphere centres (each from
+   three or more touches) by Kabsch; otherwise a plane's normal (from three
+   touches, or a plane sensor) fixes one direction and a sweep about it, with
+   the translation solved by batched Gauss-Newton (or from a sphere centre),
+   seeds Levenberg-Marquardt; a nominal pose seeds it directly;
 2. keeps every distinct converged pose whose residual passes a chi-square
-   test and whose touches lie inside their features' finite extents;
+   test and whose touches are admissible (inside their features' finite
+   patches, touched from outside when the probe's approach is known);
 3. names the status ``unique``, ``ambiguous`` (with the touch that best
    separates the candidates), ``inconsistent`` (with a touch flagged by a
    robust refit when one explains it) or ``underdetermined`` (with the free
