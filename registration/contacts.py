@@ -167,7 +167,7 @@ def _point_on(rows, xl, x, kind, yl, y):
     if CORE[kind] == "point":
         r = x - y["c"]
         if kind == "P":
-            for unit, axis in zip(_units(r.shape), range(3)):
+            for axis, unit in enumerate(_units(r.shape)):
                 rows.add(r[..., axis], {(xl, "o"): unit, (yl, "c"): -unit})
             return
         length = np.linalg.norm(r, axis=-1)
@@ -221,7 +221,7 @@ def _normals_parallel(rows, al, a, bl, nb, key):
 def _fixed_fixed(rows, A, a, B, b):
     """Both contact points known: they coincide, and the orientations there agree."""
     r = a["o"] - b["o"]
-    for unit, axis in zip(_units(r.shape), range(3)):
+    for axis, unit in enumerate(_units(r.shape)):
         rows.add(r[..., axis], {("A", "o"): unit, ("B", "o"): -unit})
     shapes = {_orientation(A.kind), _orientation(B.kind)}
     if shapes == {"normal"}:
@@ -243,7 +243,7 @@ def _fixed_mobile(rows, xl, X, x, yl, Y, y, rho):
     core = CORE[Y.kind]
     if core == "point":
         r = target - y["c"]
-        for unit, axis in zip(_units(r.shape), range(3)):
+        for axis, unit in enumerate(_units(r.shape)):
             rows.add(r[..., axis], {(xl, "o"): unit, (xl, "u"): rho[..., None] * unit, (yl, "c"): -unit})
     elif core == "line":
         r = target - y["p"]

@@ -54,7 +54,7 @@ def test_every_listed_row_is_wrong_in_print_and_right_as_corrected(computed):
     assert len(rows) == 19
     printed_right = {row["members"] for row in table_v() if computed.get(row["members"]) == row["count"]}
     corrections = [members for _, _, members in rows]
-    for (page, column, printed, count), kind, corrected in rows:
+    for (_, _, printed, count), kind, corrected in rows:
         assert computed[corrected] == count
         assert corrected not in printed_right
         members = re.findall(r"\{([^}]*)\}", printed)

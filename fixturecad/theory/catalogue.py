@@ -67,10 +67,6 @@ class CatalogueEntry:
     def group(self) -> str:
         return group_notation(list(self.chain))
 
-    @property
-    def constraint_rows(self) -> int:
-        return 6 - self.dim
-
 
 def free_twists(instance: Instance) -> np.ndarray:
     """Basis of the twists the contact leaves free, shape (d, 6)."""
@@ -156,10 +152,6 @@ def classes() -> dict[str, list[CatalogueEntry]]:
     for entry in catalogue():
         grouped[entry.contact_class].append(entry)
     return grouped
-
-
-def class_dimension(name: str) -> int:
-    return classes()[name][0].dim
 
 
 def lookup(name: str) -> CatalogueEntry:

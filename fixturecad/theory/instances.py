@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fixturecad.registration.contacts import CORE, ContactType, Side, contact_rows, make_side
+from fixturecad.registration.contacts import ContactType, Side, contact_rows, make_side
 
 
 @dataclass
