@@ -52,3 +52,11 @@ def test_lookup_accepts_either_side_order_and_names_valid_contacts():
     assert lookup("PL/M-P/F").name == "P/F-PL/M"
     with pytest.raises(ValueError, match="not a contact of Table I; valid contacts: P/F-P/F"):
         lookup("PL/F-L/M")
+
+
+def test_descriptions_name_what_places_each_subgroup():
+    described = {entry.name: entry.description for entry in catalogue()}
+    assert described["S/F-S/F"] == "u: the line through the sensor sphere centre and the fixture sphere centre"
+    assert described["P/F-S/M"] == "o: the contact point; o': the fixture sphere centre"
+    assert described["L/M-L/M"] == "u: the sensor line; u': the contact normal; u'': the fixture line"
+    assert described["PL/F-C/F"] == "u: parallel to the fixture cylinder axis"

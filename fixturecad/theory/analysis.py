@@ -7,14 +7,12 @@ contacts: "rotation about the line through the two sphere centres".
 """
 
 from dataclasses import dataclass
-from itertools import combinations
-
 import numpy as np
 
 from fixturecad.theory.catalogue import CLASSES, lookup
 from fixturecad.theory.enumeration import enumerate_classes
 from fixturecad.theory.groups import Subgroup, _rank
-from fixturecad.theory.instances import generic_instance
+from fixturecad.theory.instances import generic_instance, named_entities
 
 ANALYSIS_SEED = 8
 
@@ -75,33 +73,13 @@ def analyze(names: list[str]) -> Analysis:
     )
 
 
-def _named_entities(instances):
-    """Points and lines of the placed contacts, named for a reader."""
-    points, lines = {}, {}
-    several = len(instances) > 1
-    for number, instance in enumerate(instances, start=1):
-        suffix = f" of contact {number} ({instance.ctype.name})" if several else ""
-        for name, point in instance.points.items():
-            points[name + suffix] = point
-        for name, (point, direction) in instance.lines.items():
-            lines[name + suffix] = (point, direction)
-    # Lines through two named points come first, those avoiding contact points before the rest:
-    # "the line through the two sphere centres" reads better than "the contact normal".
-    pairs = sorted(combinations(points.items(), 2), key=lambda pair: sum("contact point" in n for n, _ in pair))
-    through = {}
-    for (name_a, a), (name_b, b) in pairs:
-        if np.linalg.norm(a - b) > 1e-6:
-            through[f"the line through {name_a} and {name_b}"] = (a, (b - a) / np.linalg.norm(b - a))
-    return points, through | lines
-
-
 def describe_freedom(wrenches: np.ndarray, instances) -> list[str]:
     """Name the free motions left by stacked constraint rows, shape (k, 6)."""
     _, s, vt = np.linalg.svd(np.vstack([wrenches, np.zeros((1, 6))]))
     free = vt[_rank(wrenches):]
     dim = len(free)
     within = lambda group: _rank(np.vstack([free, group.algebra()])) == dim
-    points, lines = _named_entities(instances)
+    points, lines = named_entities(instances)
     candidates = [(f"spherical motion about {name}", Subgroup("S", p, np.zeros(3))) for name, p in points.items()]
     for name, (p, d) in lines.items():
         candidates += [

@@ -13,8 +13,8 @@ from functools import cache
 import numpy as np
 
 from fixturecad.registration.contacts import CORE, ContactType
-from fixturecad.theory.groups import Subgroup, _rank, class_name, group_notation, simplify
-from fixturecad.theory.instances import Instance, generic_instance
+from fixturecad.theory.groups import Subgroup, _rank, class_name, group_notation, labelled, simplify
+from fixturecad.theory.instances import Instance, generic_instance, named_entities
 
 SEED = 1994  # the catalogue is computed on seeded generic instances
 # Table IV order, which is also the order of classes within a Table V row.
@@ -66,6 +66,32 @@ class CatalogueEntry:
     @property
     def group(self) -> str:
         return group_notation(list(self.chain))
+
+    @property
+    def description(self) -> str:
+        """What each letter of the group stands for, e.g. ``o: the contact point``."""
+        return "; ".join(f"{anchor}: {_anchor_words(factor, self.instance)}"
+                         for factor, _, anchor in labelled(list(self.chain)))
+
+
+def _anchor_words(factor: Subgroup, instance: Instance) -> str:
+    """Name the point, line or plane that places a subgroup, from the instance's named entities."""
+    points, lines = named_entities([instance])
+    p, w = factor.point, factor.direction
+    if factor.kind == "S":
+        return next(name for name, q in points.items() if np.linalg.norm(p - q) < 1e-6)
+    if factor.kind in ("T2", "G3"):
+        for label, side in (("sensor", instance.sensor), ("fixture", instance.fixture)):
+            if side.kind == "PL" and abs(side["n"] @ w) > 1 - 1e-9:
+                return f"the {label} plane"
+        return "the tangent plane at the contact point"
+    parallel = [(name, q, d) for name, (q, d) in lines.items() if abs(d @ w) > 1 - 1e-9]
+    if factor.kind == "T1":
+        return "parallel to " + parallel[0][0]
+    on_axis = [name for name, q, d in parallel if np.linalg.norm(np.cross(p - q, d)) < 1e-6]
+    if on_axis:
+        return on_axis[0]
+    return "the line through the contact point along " + parallel[0][0]
 
 
 def free_twists(instance: Instance) -> np.ndarray:

@@ -15,7 +15,7 @@ ELEMENTS = ("P", "L", "PL", "S", "C")
 
 @app.command()
 def contacts(fmt: FormatOption = Format.table):
-    """Tables I, III and IV as computed: contact, elements, F/M, group, dimension, class."""
+    """Tables I, III and IV as computed: contact, elements, F/M, group, dimension, class, description."""
     from fixturecad.registration.contacts import KIND_NAMES
     from fixturecad.theory.catalogue import catalogue
 
@@ -29,8 +29,9 @@ def contacts(fmt: FormatOption = Format.table):
             "group": entry.group,
             "dim": entry.dim,
             "class": entry.contact_class,
+            "description": entry.description,
         })
-    typer.echo(render(rows, ["contact", "elements", "sides", "group", "dim", "class"], fmt))
+    typer.echo(render(rows, ["contact", "elements", "sides", "group", "dim", "class", "description"], fmt))
 
 
 def _elements(text: str | None, option: str):

@@ -185,18 +185,26 @@ def class_name(chain: list) -> str:
     return "-".join(kinds)
 
 
-def group_notation(chain: list) -> str:
-    """Table III notation, e.g. ``{S_o}{T_P}`` or ``{C_u}{R_{u'}}{C_{u''}}``."""
+def labelled(chain: list) -> list[tuple[Subgroup, str, str]]:
+    """The factors in the paper's reading order with their symbol and anchor letter.
+
+    E.g. ``[(S, "S_o", "o"), (S, "S_{o'}", "o'")]``: each letter (o, u, P) is
+    primed once more at every new factor that uses it, as in Table III.
+    """
     if class_name(chain) != "-".join(f.kind for f in chain):
         chain = chain[::-1]
     counts = {}
-    parts = []
+    out = []
     for factor in chain:
         symbol = NOTATION[factor.kind]
         letter = symbol[-1]
         index = counts.get(letter, 0)
         counts[letter] = index + 1
-        if index:
-            symbol = f"{symbol[:-1]}{{{letter}{chr(39) * index}}}"
-        parts.append("{" + symbol + "}")
-    return "".join(parts)
+        anchor = letter + "'" * index
+        out.append((factor, f"{symbol[:-1]}{{{anchor}}}" if index else symbol, anchor))
+    return out
+
+
+def group_notation(chain: list) -> str:
+    """Table III notation, e.g. ``{S_o}{T_P}`` or ``{C_u}{R_{u'}}{C_{u''}}``."""
+    return "".join("{" + symbol + "}" for _, symbol, _ in labelled(chain))

@@ -6,6 +6,7 @@ free motions, the class and every rank test are computed on such instances.
 """
 
 from dataclasses import dataclass
+from itertools import combinations
 
 import numpy as np
 
@@ -128,3 +129,23 @@ def generic_instance(ctype: ContactType, rng: np.random.Generator) -> Instance:
             values, _ = contact_rows(ctype, sides["A"], sides["B"], 0.0)
             rho = float(values[0])
     return Instance(ctype, sides["A"], sides["B"], rho, o, nz, points, lines)
+
+
+def named_entities(instances):
+    """Points and lines of the placed contacts, named for a reader."""
+    points, lines = {}, {}
+    several = len(instances) > 1
+    for number, instance in enumerate(instances, start=1):
+        suffix = f" of contact {number} ({instance.ctype.name})" if several else ""
+        for name, point in instance.points.items():
+            points[name + suffix] = point
+        for name, (point, direction) in instance.lines.items():
+            lines[name + suffix] = (point, direction)
+    # Lines through two named points come first, those avoiding contact points before the rest:
+    # "the line through the two sphere centres" reads better than "the contact normal".
+    pairs = sorted(combinations(points.items(), 2), key=lambda pair: sum("contact point" in n for n, _ in pair))
+    through = {}
+    for (name_a, a), (name_b, b) in pairs:
+        if np.linalg.norm(a - b) > 1e-6:
+            through[f"the line through {name_a} and {name_b}"] = (a, (b - a) / np.linalg.norm(b - a))
+    return points, through | lines
