@@ -17,8 +17,21 @@ one feature. Their residuals and twist Jacobians come from the contact model
    separates the candidates), ``inconsistent`` (with a touch flagged by a
    robust refit when one explains it) or ``underdetermined`` (with the free
    motions named relative to the features);
-4. gives the pose covariance ``sigma^2 (J^T J)^-1``, which at the true pose is
-   the Cramer-Rao bound for Gaussian touch noise of standard deviation sigma.
+4. gives the pose covariance ``(J^T C^-1 J)^-1``, which at the true pose is
+   the Cramer-Rao bound of the sensor noise model.
+
+The sensor noise model: every touch is made by a sensor element placed with a
+small random rigid error about its contact point, a translation of standard
+deviation sigma (mm, each axis) and a rotation of sigma / lever (rad, each
+axis; ``lever_mm``, by default ``SENSOR_LEVER_MM``). A point probe or a ball
+tip is moved by the translation only, so its rows keep the iid noise sigma.
+Moving the sensor by a twist is moving the fixture by the opposite twist, so
+a touch's row covariance is ``C = J S J^T`` with J its rows' fixture twist
+Jacobian and S the placement covariance (:func:`row_whitening`). Rows are
+whitened touch by touch and scaled back to mm (covariance sigma^2 I):
+Levenberg-Marquardt is then the maximum-likelihood estimator, the chi-square
+test and ``rms_residual_mm`` use whitened rows, and the covariance is
+``sigma^2 (J_w^T J_w)^-1``.
 
 Covariances are over (rotation vector rad, fixture origin mm), both in the
 measurement frame. This module imports numpy and scipy only and nothing of
@@ -30,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import gammaincinv
 
-from .contacts import DIRECTION_KEYS, POINT_KEYS, ContactType, make_side, residuals_and_jacobian
+from .contacts import CORE, DIRECTION_KEYS, POINT_KEYS, ContactType, make_side, residuals_and_jacobian
 from .pose import (
     apply_twist,
     check_fixture2meas,
@@ -44,6 +57,7 @@ from .pose import (
 )
 
 DEFAULT_SIGMA_MM = 0.005  # touch noise standard deviation assumed by the chi-square test
+SENSOR_LEVER_MM = 20.0  # sensor size: its placement tilts by sigma / lever rad about the contact point
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
 EXTENT_SIGMAS = 3.0  # ... plus this many standard deviations of the touch's position under the pose
@@ -71,6 +85,8 @@ class TouchGroup:
     ``approach`` (n, 3), optional: the direction the probe moved to make each
     touch (measurement frame; NaN rows unknown).
     ``index`` (n,) numbers the touches in the caller's order.
+    ``centre`` (n, 3) mm, measurement frame: the point the sensor's placement
+    error turns about (see :func:`placement_centre`); None: from the sensor.
     """
 
     feature: object
@@ -82,6 +98,7 @@ class TouchGroup:
     points: np.ndarray | None = None
     rows: int = 0
     approach: np.ndarray | None = None
+    centre: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -119,8 +136,51 @@ def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
         rho = 0.0
     return TouchGroup(
         feature, ctype, sensor, fixture_side(feature, fixture_fixed), np.full(n, float(rho)),
-        np.asarray(index), points,
+        np.asarray(index), points, centre=points,
     )
+
+
+def placement_centre(kind, geometry, contact_point=None):
+    """The point (..., 3) mm a sensor's placement error turns about: its contact point.
+
+    A point probe's point or a ball tip's centre (turning about it moves
+    nothing); otherwise the known contact point ``o``, the given
+    ``contact_point``, or the sensor's own point (``q`` of a plane, ``p`` of a
+    line or a cylinder).
+    """
+    if kind == "P" or (kind == "S" and "o" not in geometry):
+        return geometry["c"]
+    if "o" in geometry:
+        return geometry["o"]
+    if contact_point is not None:
+        return np.asarray(contact_point, dtype=np.float64)
+    return geometry["q" if CORE[kind] == "plane" else ("c" if CORE[kind] == "point" else "p")]
+
+
+def row_whitening(jacobian, centres, lever_mm=SENSOR_LEVER_MM):
+    """Per-touch whitening of the rows under the sensor noise model, shape (N, k, k).
+
+    ``jacobian`` (N, k, 6): the rows' twist Jacobian of each touch (twists
+    about the frame origin); ``centres`` (N, 3) mm: the sensor placement
+    centres in the same frame. The placement error (translation sigma,
+    rotation sigma / lever about the centre) is the twist ``A (dtheta, delta)``
+    with ``A = [[I, 0], [skew(o), I]]``; the row covariance is
+    ``sigma^2 (G G^T / lever^2 + J_v J_v^T)``, ``G = J_w + J_v skew(o)``. The
+    whitening W = L^-1 (``C / sigma^2 = L L^T``) makes ``W r`` of covariance
+    sigma^2 I; it does not depend on sigma.
+    """
+    J = np.asarray(jacobian, dtype=np.float64)
+    o = np.broadcast_to(centres, (J.shape[0], 3))
+    Jw, Jv = J[..., :3], J[..., 3:]
+    # J_v skew(o): row j times skew(o) is o x j reversed, i.e. cross(j, o).
+    G = Jw + np.cross(Jv, o[:, None, :])
+    C = np.einsum("nki,nli->nkl", G, G) / lever_mm**2 + np.einsum("nki,nli->nkl", Jv, Jv)
+    k = C.shape[-1]
+    if k == 1:
+        return 1.0 / np.sqrt(np.maximum(C, 1e-300))
+    scale = np.maximum(np.einsum("nkk->n", C) / k, 1e-300)[:, None, None]
+    L = np.linalg.cholesky(C + 1e-12 * scale * np.eye(k))
+    return np.linalg.inv(L)
 
 
 def sensor_geometry(ctype, sensor, contact_point=None):
@@ -179,15 +239,24 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
     if rho is None:
         rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(getattr(feature, "radius", 0.0))
-    return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]))
+    centre = placement_centre(ctype.sensor, geometry, None if contact_point is None else np.reshape(contact_point, (1, 3)))
+    return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre)
 
 
 class Problem:
-    """A stacked touch plan: residuals (m,) and twist Jacobian (m, 6) at any pose."""
+    """A stacked touch plan: whitened residuals (m,) and twist Jacobian (m, 6) at any pose.
 
-    def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM):
-        self.groups = [g for g in groups if g.count]
+    Rows are whitened touch by touch under the sensor noise model
+    (:func:`row_whitening`, at the pose evaluated) and stay in mm: their
+    covariance is ``sigma_mm^2 I``.
+    """
+
+    def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM):
+        if not (lever_mm > 0 and np.isfinite(lever_mm)):
+            raise ValueError(f"the sensor lever must be a positive number of mm, got {lever_mm}")
+        self.groups = [g if g.centre is not None else _with_centre(g) for g in groups if g.count]
         self.sigma = float(sigma_mm)
+        self.lever = float(lever_mm)
         self._scale = None
         # Rows are computed per contact type: groups of one type on different
         # features are stacked into one call of the contact model.
@@ -198,6 +267,7 @@ class Problem:
         for g in self.batches:
             v, J = residuals_and_jacobian(g.ctype, g.sensor, g.fixture, rotation, translation, g.rho)
             g.rows = v.shape[1]
+            v, J = _whitened(v, J, g.centre, self.lever)
             values.append(v.reshape(-1))
             jacobians.append(J.reshape(-1, 6))
         return np.concatenate(values), np.concatenate(jacobians)
@@ -243,6 +313,8 @@ class Problem:
                 geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
             sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
             v, J = residuals_and_jacobian(g.ctype, sensor, g.fixture, np.eye(3), np.zeros(3), np.tile(g.rho, K))
+            centres = np.einsum("kji,knj->kni", rotations, g.centre[None] - translations[:, None])
+            v, J = _whitened(v, J, centres.reshape(-1, 3), self.lever)
             values.append(v.reshape(K, -1))
             jacobians.append(J.reshape(K, -1, 6))
         return np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1)
@@ -256,7 +328,7 @@ class Problem:
                 groups.append(g)
             elif keep.any():
                 groups.append(_subset(g, keep))
-        return Problem(groups, self.sigma)
+        return Problem(groups, self.sigma, self.lever)
 
     def scale(self):
         """A length (mm) that balances rotation and translation columns of the Jacobian."""
@@ -267,6 +339,21 @@ class Problem:
                 pts = np.concatenate(pts)
                 self._scale = max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
         return self._scale
+
+
+def _with_centre(group):
+    """The group with its sensor placement centres filled in from the sensor's geometry."""
+    centre = placement_centre(group.sensor.kind, group.sensor.geometry)
+    group.centre = np.broadcast_to(np.asarray(centre, dtype=np.float64), (group.count, 3)).copy()
+    return group
+
+
+def _whitened(values, jacobian, centres, lever_mm):
+    """Rows (N, k) and Jacobian (N, k, 6) whitened touch by touch (:func:`row_whitening`)."""
+    W = row_whitening(jacobian, centres, lever_mm)
+    if W.shape[-1] == 1:
+        return values * W[..., 0], jacobian * W
+    return np.einsum("nkl,nl->nk", W, values), np.einsum("nkl,nlc->nkc", W, jacobian)
 
 
 def _merge(groups):
@@ -294,6 +381,7 @@ def _merge(groups):
             None, first.ctype, type(first.sensor)(first.sensor.kind, first.sensor.fixed, sensor),
             type(first.fixture)(first.fixture.kind, first.fixture.fixed, fixture),
             np.concatenate([m.rho for m in members]), np.concatenate([m.index for m in members]),
+            centre=np.concatenate([np.broadcast_to(m.centre, (m.count, 3)) for m in members]),
         ))
     return batches
 
@@ -309,7 +397,8 @@ def _subset(group, keep):
     sensor = cut(group.sensor)
     rho = group.rho[keep]
     points = None if group.points is None else group.points[keep]
-    return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows)
+    return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows,
+                      centre=group.centre[keep])
 
 
 def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60, known=(),
@@ -760,7 +849,10 @@ def _best_starts(problem, starts, blocks, mode):
 
 
 def covariance(jacobian, translation, sigma):
-    """Pose covariance (6, 6) over (rotation vector rad, fixture origin mm); None if singular."""
+    """Pose covariance (6, 6) over (rotation vector rad, fixture origin mm); None if singular.
+
+    ``jacobian`` (m, 6): whitened rows (covariance sigma^2 I, see :class:`Problem`).
+    """
     F = jacobian.T @ jacobian
     try:
         C = sigma**2 * np.linalg.inv(F)
@@ -773,7 +865,11 @@ def covariance(jacobian, translation, sigma):
 
 
 def cramer_rao_bound(problem, fixture2meas, sigma):
-    """Cramer-Rao bound (6, 6) of the pose for Gaussian row noise of standard deviation sigma."""
+    """Cramer-Rao bound (6, 6) of the pose under the sensor noise model with placement noise sigma (mm).
+
+    The sensors' placement error: translation sigma, rotation sigma / lever
+    about each contact point (``problem.lever``), see :func:`row_whitening`.
+    """
     T = check_fixture2meas(fixture2meas)
     _, J = problem.evaluate(T[:3, :3], T[:3, 3])
     return covariance(J, T[:3, 3], sigma)
@@ -1051,7 +1147,7 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
-                     contacts=(), approaches=None):
+                     contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM):
     """Register a fixture from labelled touches; return the result dict (see module doc).
 
     Parameters
@@ -1059,17 +1155,19 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     features : dict id -> feature
     touches : dict id -> array-like, shape (n, 3), mm, measurement frame
     initial_pose : array-like, shape (4, 4), optional nominal ``fixture2meas``
-    sigma_mm : float, touch noise standard deviation for the chi-square test and covariance
+    sigma_mm : float, sensor placement noise (mm, each axis) for the chi-square test and covariance
     ball_radius_mm : float, radius of a ball tip (0 for a point probe); touches are ball centres
     contacts : list of dict, touches of other contact types (see ``contact_touch``)
     approaches : dict id -> array-like, shape (n, 3), optional probe approach directions;
         a pose at which a probe would have touched a surface from inside is rejected
+    lever_mm : float, sensor size: plane, line and fixed-surface sensors tilt by
+        sigma_mm / lever_mm rad about their contact points (see the module doc)
 
     Returns
     -------
     dict with ``pose`` (4x4 nested list, fixture2meas), ``status`` ("unique",
     "ambiguous", "inconsistent" or "underdetermined"), ``rms_residual_mm``,
-    ``solutions`` (each ``pose``, ``rms_residual_mm``; every admissible pose that
+    ``solutions`` (each ``pose``, ``rms_residual_mm``, of the whitened rows; every admissible pose that
     passes the chi-square test, best first), ``covariance`` (6x6 over rotation
     vector rad and fixture origin mm, None when underdetermined),
     ``sigma_translation_mm``, ``sigma_rotation_deg``, ``free_motions`` (names),
@@ -1079,7 +1177,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     ``pose``), ``touches``, ``rows``, ``rank``.
     """
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
-    problem = Problem(groups, sigma_mm)
+    problem = Problem(groups, sigma_mm, lever_mm)
     if not problem.groups:
         raise ValueError("no touches given")
     solutions = solve(problem, initial_pose)
@@ -1158,3 +1256,40 @@ def plan_touches(entries, fixture2meas):
                 contact["fixture"] = {"o": point.tolist()}
             contacts.append(contact)
     return {key: np.array(value) for key, value in touches.items()}, contacts
+
+
+def perturb_touches(touches, contacts, rng, sigma_mm, lever_mm=SENSOR_LEVER_MM):
+    """Touches as made by sensors placed with the noise model's random rigid errors.
+
+    Every touch's sensor is moved by a translation N(0, sigma_mm^2 I) and a
+    rotation N(0, (sigma_mm / lever_mm)^2 I) (rotation vector, rad) about its
+    contact point (a point probe's point, a ball's centre): point touches by
+    the translation, contact sensors' points, directions and contact point by
+    the whole motion. Returns new (touches, contacts) like :func:`plan_touches`.
+    """
+    touches = {key: np.asarray(value, float) + rng.normal(scale=sigma_mm, size=np.shape(value))
+               for key, value in touches.items()}
+    out = []
+    for contact in contacts:
+        sensor = dict(contact["sensor"])
+        if sensor.get("kind") in ("point", "sphere") or "point" not in contact:
+            centre = np.asarray(sensor.get("center", sensor.get("point")), float)
+        else:
+            centre = np.asarray(contact["point"], float)
+        R = rotation_from_vector(rng.normal(scale=sigma_mm / lever_mm, size=3))
+        shift = rng.normal(scale=sigma_mm, size=3)
+
+        def place(x):
+            return (centre + R @ (np.asarray(x, float) - centre) + shift).tolist()
+
+        for key in ("point", "center"):
+            if key in sensor:
+                sensor[key] = place(sensor[key])
+        for key in ("normal", "direction", "axis"):
+            if key in sensor:
+                sensor[key] = (R @ np.asarray(sensor[key], float)).tolist()
+        contact = {**contact, "sensor": sensor}
+        if "point" in contact:
+            contact["point"] = place(contact["point"])
+        out.append(contact)
+    return touches, out
