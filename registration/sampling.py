@@ -2,14 +2,14 @@
 
 Touches are sampled on the mesh triangles that belong to each sensing
 feature (so they carry the tessellation's chordal error), moved by a random
-pose, and perturbed by Gaussian noise. Line and point features and non-point
+pose, and perturbed by the engine's sensor noise model. Line and point features and non-point
 sensors are placed analytically. trimesh is imported here only, never by the
 engine.
 """
 
 import numpy as np
 
-from .engine import plan_touches
+from .engine import SENSOR_LEVER_MM, perturb_touches, plan_touches
 from .features import feature_from_json
 from .pose import fixture2meas_from_rt, random_rotation
 
@@ -121,16 +121,16 @@ class TouchSampler:
             out.append({**entry, "points": np.asarray(points).tolist()})
         return out
 
-    def draw(self, rng, noise_mm, fixture2meas=None):
-        """(touches by feature, contacts, true fixture2meas) with Gaussian noise of ``noise_mm``."""
+    def draw(self, rng, noise_mm, fixture2meas=None, lever_mm=SENSOR_LEVER_MM):
+        """(touches by feature, contacts, true fixture2meas), sensors placed with noise ``noise_mm``.
+
+        The engine's sensor noise model (:func:`perturb_touches`): translation
+        ``noise_mm``, rotation ``noise_mm / lever_mm`` about each contact point.
+        """
         if fixture2meas is None:
             fixture2meas = fixture2meas_from_rt(
                 random_rotation(rng), rng.uniform(-POSE_TRANSLATION_RANGE_MM, POSE_TRANSLATION_RANGE_MM, 3)
             )
         touches, contacts = plan_touches(self.fixture_entries(rng), fixture2meas)
-        touches = {key: value + rng.normal(scale=noise_mm, size=value.shape) for key, value in touches.items()}
-        for contact in contacts:
-            sensor = contact["sensor"]
-            if "point" in sensor:
-                sensor["point"] = (np.asarray(sensor["point"]) + rng.normal(scale=noise_mm, size=3)).tolist()
+        touches, contacts = perturb_touches(touches, contacts, rng, noise_mm, lever_mm)
         return touches, contacts, fixture2meas

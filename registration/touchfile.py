@@ -163,23 +163,31 @@ def format_result(result):
     return "\n".join(lines)
 
 
-def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.005):
+def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.005, default_lever_mm=None):
     """Command line: ``register.py touches.csv [--json]``; bad input is one line, exit 2."""
+    from .engine import SENSOR_LEVER_MM
+
+    default_lever_mm = SENSOR_LEVER_MM if default_lever_mm is None else default_lever_mm
     parser = argparse.ArgumentParser(prog=prog, description="Pose of the fixture from touches.")
     parser.add_argument("touches", help="touch file: CSV feature,x,y,z (mm) or JSON")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
-    parser.add_argument("--sigma", type=float, default=default_sigma_mm, help="touch noise, mm")
+    parser.add_argument("--sigma", type=float, default=default_sigma_mm,
+                        help="sensor placement noise, mm (each axis)")
+    parser.add_argument("--lever", type=float, default=default_lever_mm,
+                        help="sensor size, mm: plane and line sensors tilt by sigma/lever rad")
     parser.add_argument("--ball-radius", type=float, default=None, help="ball tip radius, mm")
     args = parser.parse_args(argv)
     try:
         if not np.isfinite(args.sigma) or args.sigma <= 0:
             raise ValueError(f"--sigma must be a positive number of mm, got {args.sigma}")
+        if not np.isfinite(args.lever) or args.lever <= 0:
+            raise ValueError(f"--lever must be a positive number of mm, got {args.lever}")
         touches, contacts, radius, approaches = read_touch_file(args.touches, list(features))
         if args.ball_radius is not None:
             radius = args.ball_radius
         check_enough(features, touches, contacts, radius)
         result = register(touches, sigma_mm=args.sigma, ball_radius_mm=radius, contacts=contacts,
-                          approaches=approaches)
+                          approaches=approaches, lever_mm=args.lever)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2

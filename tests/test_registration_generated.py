@@ -131,6 +131,26 @@ def test_generated_routine_reads_plane_and_line_sensors_from_json(bare_site, tmp
     assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
 
 
+def test_generated_routine_takes_the_sensor_noise_model(bare_site, tmp_path):
+    """--sigma and --lever of register.py give the library's pose and covariance."""
+    document, truth, touches, contacts = generated_case(tmp_path, "quarter-sphere", 6)
+    touches, contacts = engine.perturb_touches(touches, contacts, np.random.default_rng(6), 0.002, 10.0)
+    entries = [{"feature": k, "point": p.tolist()} for k, v in touches.items() for p in v] + contacts
+    (tmp_path / "touches.json").write_text(json.dumps({"touches": entries}))
+    out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json", "--sigma", 0.002, "--lever", 10)
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    from fixturecad.registration.features import feature_from_json
+
+    features = {f["id"]: feature_from_json(f) for f in document["features"]}
+    library = engine.register_touches(features, touches, sigma_mm=0.002, contacts=contacts, lever_mm=10.0)
+    assert result["status"] == library["status"] == "unique"
+    assert np.abs(np.array(result["pose"]) - np.array(library["pose"])).max() < 1e-9
+    assert np.allclose(result["covariance"], library["covariance"], rtol=1e-6, atol=1e-18)
+    bad = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--lever", 0)
+    assert bad.returncode == 2 and "--lever must be a positive number" in bad.stderr
+
+
 BAD_FILES = {
     "unknown feature": ("feature,x,y,z\nnope,1,2,3\n", "unknown feature 'nope'"),
     "NaN": ("feature,x,y,z\ntop,nan,2,3\n", "finite"),
