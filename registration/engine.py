@@ -267,7 +267,8 @@ class Problem:
         for g in self.batches:
             v, J = residuals_and_jacobian(g.ctype, g.sensor, g.fixture, rotation, translation, g.rho)
             g.rows = v.shape[1]
-            v, J = _whitened(v, J, g.centre, self.lever)
+            if not _point_sensor(g.sensor):
+                v, J = _whitened(v, J, g.centre, self.lever)
             values.append(v.reshape(-1))
             jacobians.append(J.reshape(-1, 6))
         return np.concatenate(values), np.concatenate(jacobians)
@@ -313,8 +314,9 @@ class Problem:
                 geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
             sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
             v, J = residuals_and_jacobian(g.ctype, sensor, g.fixture, np.eye(3), np.zeros(3), np.tile(g.rho, K))
-            centres = np.einsum("kji,knj->kni", rotations, g.centre[None] - translations[:, None])
-            v, J = _whitened(v, J, centres.reshape(-1, 3), self.lever)
+            if not _point_sensor(g.sensor):
+                centres = np.einsum("kji,knj->kni", rotations, g.centre[None] - translations[:, None])
+                v, J = _whitened(v, J, centres.reshape(-1, 3), self.lever)
             values.append(v.reshape(K, -1))
             jacobians.append(J.reshape(K, -1, 6))
         return np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1)
@@ -346,6 +348,12 @@ def _with_centre(group):
     centre = placement_centre(group.sensor.kind, group.sensor.geometry)
     group.centre = np.broadcast_to(np.asarray(centre, dtype=np.float64), (group.count, 3)).copy()
     return group
+
+
+def _point_sensor(side):
+    """A point probe or a ball tip: only shifted by its placement error, its rows' gradients
+    along it orthonormal, so :func:`row_whitening` is the identity and is skipped."""
+    return side.kind == "P" or (side.kind == "S" and "o" not in side.geometry)
 
 
 def _whitened(values, jacobian, centres, lever_mm):
