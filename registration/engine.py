@@ -63,6 +63,9 @@ EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be ju
 EXTENT_SIGMAS = 3.0  # ... plus this many standard deviations of the touch's position under the pose
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
 PLANE_CYLINDER_STEPS = 180  # axis directions tried on the cone about the plane normal
+NORMAL_SWEEP_RAD = np.radians(2.0)  # plane touches this unsure of the normal (3 sigma) sweep it ...
+NORMAL_SWEEP_STEPS = 60  # ... in this many turns about their line
+CIRCLE_ITERATIONS = 6  # Gauss-Newton steps fitting a circle of the cylinder's radius to the touches
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
 UNSWEPT_PER_BLOCK = 6  # fallback starts per candidate centre refined before stopping at a solution
 SAME_POSE_ROTATION_RAD = 1e-4
@@ -574,9 +577,13 @@ def plane_cylinder_starts(problem, steps=PLANE_CYLINDER_STEPS, keep=4):
     """Starting poses by the paper's Example Two steps (a plane and a cylinder, point touches).
 
     1. the plane normal from three or more touches (closed form, either sign);
+       touches nearly on a line leave its turn about that line open, so it is
+       also swept all the way round;
     2. the cylinder axis on the cone of the known plane-axis angle about that
        normal, where the touches best fit a circle of the known radius in the
-       plane normal to it (a one-angle search, every local minimum kept);
+       plane normal to it (a one-angle search, the best local minima kept);
+       touches on a short arc fit two such circles, mirror images across
+       their chord, each searched;
     3. a point on the axis from that circle's centre;
     4. the frame from normal and axis, its origin where the axis meets the plane.
     """
@@ -611,29 +618,65 @@ def plane_cylinder_starts(problem, steps=PLANE_CYLINDER_STEPS, keep=4):
         # Circle through the touches in each axis' normal plane: 2 q.c + k = |q|^2, linear in (c, k).
         A = np.concatenate([2.0 * q, np.ones(q.shape[:2] + (1,))], axis=2)
         b = np.sum(q**2, axis=2)
-        normal = np.einsum("kni,knj->kij", A, A) + 1e-12 * np.eye(3)
-        centre = np.linalg.solve(normal, np.einsum("kni,kn->ki", A, b)[..., None])[:, :2, 0]
-        cost = np.sum((np.linalg.norm(q - centre[:, None], axis=2) - radius) ** 2, axis=1)
-        return axes, u1, u2, centre, cost
+        gram = np.einsum("kni,knj->kij", A, A) + 1e-12 * np.eye(3)
+        centre = np.linalg.solve(gram, np.einsum("kni,kn->ki", A, b)[..., None])[:, :2, 0]
+        # Touches on a short arc fix that circle poorly: its mirror image across
+        # the touches' chord line is the twin centre. Both are refined to the known
+        # radius (Gauss-Newton); centres (K, 2, 2), misfits (K, 2): index 0 the
+        # centre on the side of the chord line the plane normal points to.
+        mean = q.mean(axis=1)
+        spread = np.einsum("kni,knj->kij", q - mean[:, None], q - mean[:, None])
+        w = np.linalg.eigh(spread)[1][:, :, 0]  # normal to the chord line
+        w = w * np.where(w[:, :1] * (u1 @ n)[:, None] + w[:, 1:] * (u2 @ n)[:, None] < 0, -1.0, 1.0)
+        mirror = centre - 2.0 * np.einsum("ki,ki->k", centre - mean, w)[:, None] * w
+        centres = np.stack([centre, mirror], axis=1)
+        for _ in range(CIRCLE_ITERATIONS):
+            d = centres[:, :, None] - q[:, None]  # (K, 2, n, 2)
+            length = np.maximum(np.linalg.norm(d, axis=3), 1e-12)
+            res = length - radius
+            Jc = d / length[..., None]
+            H = np.einsum("kcni,kcnj->kcij", Jc, Jc) + 1e-9 * np.eye(2)
+            centres = centres - np.linalg.solve(H, np.einsum("kcni,kcn->kci", Jc, res)[..., None])[..., 0]
+        flip = np.einsum("kci,ki->kc", centres - mean[:, None], w)[:, 0] < 0
+        centres[flip] = centres[flip][:, ::-1]
+        cost = np.sum((np.linalg.norm(centres[:, :, None] - q[:, None], axis=3) - radius) ** 2, axis=2)
+        return axes, u1, u2, centres, cost
 
+    normal_sets = [[n_meas], [-n_meas]]
+    # Touches nearly on a line fix the normal only up to a turn about that
+    # line: sweep it all the way round as well (a flipped normal is a half turn).
+    _, spread, vt = np.linalg.svd(plane.points - plane.points.mean(axis=0), full_matrices=False)
+    if EXTENT_SIGMAS * problem.sigma > NORMAL_SWEEP_RAD * spread[1]:
+        turns = 2.0 * np.pi * np.arange(NORMAL_SWEEP_STEPS) / NORMAL_SWEEP_STEPS
+        normal_sets.append([rotation_from_vector(a * vt[0]) @ n_meas for a in turns])
     starts = []
-    for sign in (1.0, -1.0):
-        n = sign * n_meas
-        e1, e2 = perpendicular_basis(n)
+    for normals in normal_sets:
+        bases = [perpendicular_basis(n) for n in normals]
         theta = np.arange(steps) * step
-        cost = circle_fits(n, e1, e2, theta)[4]
-        before, after = np.roll(cost, 1), np.roll(cost, -1)
-        minima = np.flatnonzero((cost <= before) & (cost <= after))
-        minima = minima[np.argsort(cost[minima])][:keep]
-        # A parabola through each minimum and its neighbours refines the angle.
-        curvature = before[minima] - 2.0 * cost[minima] + after[minima]
-        shift = np.where(curvature > 0, 0.5 * (before[minima] - after[minima]) / np.maximum(curvature, 1e-300), 0.0)
-        refined = theta[minima] + step * np.clip(shift, -1.0, 1.0)
-        axes, u1, u2, centre, _ = circle_fits(n, e1, e2, refined)
-        for k in range(len(refined)):
-            s = axes[k]
-            on_axis = centre[k, 0] * u1[k] + centre[k, 1] * u2[k]
+        costs = np.array([circle_fits(n, e1, e2, theta)[4] for n, (e1, e2) in zip(normals, bases)])  # (P, K, 2)
+        # Local minima of either centre's misfit over the axis angle (and the
+        # normal's turn when swept), the best ``keep`` (twice that when swept).
+        found = []
+        for c in range(2):
+            cost = costs[..., c]
+            low = np.ones(cost.shape, bool)
+            for axis in (0, 1):
+                for shift in (1, -1):
+                    low &= cost <= np.roll(cost, shift, axis=axis)
+            for j, k in zip(*np.nonzero(low)):
+                if c and abs(costs[j, k, 1] - costs[j, k, 0]) < 1e-12 * max(costs[j, k, 0], 1e-300) + 1e-15:
+                    continue  # both centres the same: found once
+                # A parabola through the minimum and its neighbours refines the angle.
+                before, after = cost[j, k - 1], cost[j, (k + 1) % steps]
+                curvature = before - 2.0 * cost[j, k] + after
+                shift = 0.5 * (before - after) / curvature if curvature > 0 else 0.0
+                found.append((cost[j, k], j, theta[k] + step * float(np.clip(shift, -1.0, 1.0)), c))
+        for _, j, angle, c in sorted(found)[:keep * (1 if len(normals) == 1 else 2)]:
+            n = normals[j]
+            axes, u1, u2, centres, _ = circle_fits(n, *bases[j], np.array([angle]))
+            s = axes[0]
             R = _frame(n, s) @ frame_fix.T
+            on_axis = centres[0, c, 0] * u1[0] + centres[0, c, 1] * u2[0]
             along = n @ (plane.points.mean(axis=0) - on_axis) / (n @ s)
             starts.append((R, on_axis + along * s - R @ origin_fix))
     return starts

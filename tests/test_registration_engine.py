@@ -344,6 +344,57 @@ def test_contact_type_of_point_touches():
     assert engine.Problem([group]).size == 2
 
 
+def test_cylinder_touches_at_two_angles_try_both_circle_centres():
+    """Seeded reproduction (simulate --plan random on inclined-plane-cylinder, seed 0, trial
+    1238): the four cylinder touches lie at two angles, so circles of the cylinder's radius
+    through them have two centres, mirror images across their chord. Taking one only found no
+    admissible pose ("inconsistent"); both give the pose, and it is the only one."""
+    features, _ = _plan("inclined-plane-cylinder", "default")
+    truth = np.array([
+        [-0.59655120927650329, 0.77485118239626416, -0.20912269090142421, -52.473163948690612],
+        [0.27831119542267946, -0.044674624637789373, -0.95945143515233300, -94.103485489079546],
+        [-0.75277455669884352, -0.63056309997698390, -0.18899905749573365, -1.8162175316073927],
+        [0.0, 0.0, 0.0, 1.0],
+    ])
+    local = {  # fixture frame, mm, with the trial's noise
+        "plane": [[-8.4284, -16.865, -8.4293], [0.5244, -8.72, 0.521], [9.5348, -11.621, 9.533]],
+        "cylinder": [[17.3426, 9.9481, -42.4758], [7.1084, 18.6914, -4.2065],
+                     [17.4769, 9.7218, -51.1127], [6.5743, 18.8774, -57.6937]],
+    }
+    touches = {k: np.array(v) @ truth[:3, :3].T + truth[:3, 3] for k, v in local.items()}
+    sigma = np.hypot(0.005, 0.01 / np.sqrt(3.0))
+    result = engine.register_touches(features, touches, sigma_mm=sigma)
+    assert result["status"] == "unique"
+    dt, dr = pose_errors(np.array(result["pose"]), truth)
+    assert dt < 0.05 and dr < 1e-3
+
+
+def test_plane_touches_nearly_on_a_line_report_both_poses():
+    """Seeded reproduction (simulate --plan random on inclined-plane-cylinder, seed 0, trial 20):
+    the three plane touches lie within 0.06 mm of a line, so the plane normal may turn about
+    it. Two poses fit; only the wrong one was found and reported "unique". Sweeping the
+    normal about the line finds both: "ambiguous", the true pose among the candidates."""
+    features, _ = _plan("inclined-plane-cylinder", "default")
+    truth = np.array([
+        [-0.11572981599550847, -0.8066041159268256, -0.5796519730489578, -59.89284560165924],
+        [-0.9678965420856225, 0.22266601519036344, -0.1166024420753684, -28.271750958858405],
+        [0.22312080474115478, 0.5475487611611853, -0.806478431604039, 84.41191235897767],
+        [0.0, 0.0, 0.0, 1.0],
+    ])
+    local = {  # fixture frame, mm, with the trial's noise
+        "plane": [[12.002, 3.325, 12.0], [-19.1206, 0.3745, -19.1216], [3.5515, 2.594, 3.56]],
+        "cylinder": [[-11.1731, -16.5774, -59.9491], [1.7446, 19.918, -26.576],
+                     [19.9579, -1.2913, 3.9665], [7.0313, 18.7241, -27.4485]],
+    }
+    touches = {k: np.array(v) @ truth[:3, :3].T + truth[:3, 3] for k, v in local.items()}
+    result = engine.register_touches(features, touches, sigma_mm=np.hypot(0.005, 0.01 / np.sqrt(3.0)))
+    assert result["status"] == "ambiguous"
+    errors = _solution_errors(result, truth)
+    assert len(errors) == 2
+    assert min(dt for dt, dr in errors if dr < 0.02) < 0.05
+    assert result["separating_touch"] is not None
+
+
 def test_the_paper_plane_and_cylinder_steps_start_next_to_the_pose():
     """Example Two: normal from 3 plane touches, axis on its cone from 4 cylinder touches, origin."""
     features, entries = _plan("inclined-plane-cylinder", "default")
