@@ -625,18 +625,23 @@ def plane_cylinder_starts(problem, steps=PLANE_CYLINDER_STEPS, keep=4):
         # radius (Gauss-Newton); centres (K, 2, 2), misfits (K, 2): index 0 the
         # centre on the side of the chord line the plane normal points to.
         mean = q.mean(axis=1)
-        spread = np.einsum("kni,knj->kij", q - mean[:, None], q - mean[:, None])
-        w = np.linalg.eigh(spread)[1][:, :, 0]  # normal to the chord line
+        x = q - mean[:, None]
+        chord = 0.5 * np.arctan2(2.0 * np.sum(x[..., 0] * x[..., 1], axis=1),
+                                 np.sum(x[..., 0] ** 2 - x[..., 1] ** 2, axis=1))
+        w = np.stack([-np.sin(chord), np.cos(chord)], axis=1)  # normal to the chord line
         w = w * np.where(w[:, :1] * (u1 @ n)[:, None] + w[:, 1:] * (u2 @ n)[:, None] < 0, -1.0, 1.0)
         mirror = centre - 2.0 * np.einsum("ki,ki->k", centre - mean, w)[:, None] * w
         centres = np.stack([centre, mirror], axis=1)
         for _ in range(CIRCLE_ITERATIONS):
             d = centres[:, :, None] - q[:, None]  # (K, 2, n, 2)
-            length = np.maximum(np.linalg.norm(d, axis=3), 1e-12)
+            length = np.maximum(np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2), 1e-12)
+            jx, jy = d[..., 0] / length, d[..., 1] / length
             res = length - radius
-            Jc = d / length[..., None]
-            H = np.einsum("kcni,kcnj->kcij", Jc, Jc) + 1e-9 * np.eye(2)
-            centres = centres - np.linalg.solve(H, np.einsum("kcni,kcn->kci", Jc, res)[..., None])[..., 0]
+            # The 2x2 normal equations solved in closed form.
+            a, b, c = np.sum(jx * jx, 2) + 1e-9, np.sum(jx * jy, 2), np.sum(jy * jy, 2) + 1e-9
+            gx, gy = np.sum(jx * res, 2), np.sum(jy * res, 2)
+            det = a * c - b * b
+            centres = centres - np.stack([c * gx - b * gy, a * gy - b * gx], axis=-1) / det[..., None]
         flip = np.einsum("kci,ki->kc", centres - mean[:, None], w)[:, 0] < 0
         centres[flip] = centres[flip][:, ::-1]
         cost = np.sum((np.linalg.norm(centres[:, :, None] - q[:, None], axis=3) - radius) ** 2, axis=2)
@@ -671,14 +676,17 @@ def plane_cylinder_starts(problem, steps=PLANE_CYLINDER_STEPS, keep=4):
                 curvature = before - 2.0 * cost[j, k] + after
                 shift = 0.5 * (before - after) / curvature if curvature > 0 else 0.0
                 found.append((cost[j, k], j, theta[k] + step * float(np.clip(shift, -1.0, 1.0)), c))
-        for _, j, angle, c in sorted(found)[:keep * (1 if len(normals) == 1 else 2)]:
+        chosen = sorted(found)[:keep * (1 if len(normals) == 1 else 2)]
+        for j in sorted({j for _, j, _, _ in chosen}):
             n = normals[j]
-            axes, u1, u2, centres, _ = circle_fits(n, *bases[j], np.array([angle]))
-            s = axes[0]
-            R = _frame(n, s) @ frame_fix.T
-            on_axis = centres[0, c, 0] * u1[0] + centres[0, c, 1] * u2[0]
-            along = n @ (plane.points.mean(axis=0) - on_axis) / (n @ s)
-            starts.append((R, on_axis + along * s - R @ origin_fix))
+            picks = [(angle, c) for _, jj, angle, c in chosen if jj == j]
+            axes, u1, u2, centres, _ = circle_fits(n, *bases[j], np.array([angle for angle, _ in picks]))
+            for k, (_, c) in enumerate(picks):
+                s = axes[k]
+                R = _frame(n, s) @ frame_fix.T
+                on_axis = centres[k, c, 0] * u1[k] + centres[k, c, 1] * u2[k]
+                along = n @ (plane.points.mean(axis=0) - on_axis) / (n @ s)
+                starts.append((R, on_axis + along * s - R @ origin_fix))
     return starts
 
 
