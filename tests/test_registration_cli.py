@@ -117,4 +117,5 @@ def test_simulate_refuses_bad_options(built):
     folder = built("cube")
     assert_bad_input(run("simulate", folder, "--trials", 0), "--trials")
     assert_bad_input(run("simulate", folder, "--noise", -1), "--noise")
+    assert_bad_input(run("simulate", folder, "--lever", 0), "--lever")
     assert_bad_input(run("simulate", folder, "--touch-plan", "nope"), "unknown touch plan 'nope'")
