@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fixturecad.theory.catalogue import CLASSES, lookup
-from fixturecad.theory.enumeration import enumerate_classes
+from fixturecad.theory.enumeration import SEARCH_SEED, class_wrenches, locates_minimally
 from fixturecad.theory.groups import Subgroup, _rank
 from fixturecad.theory.instances import generic_instance, named_entities
 
@@ -60,7 +60,6 @@ def analyze(names: list[str]) -> Analysis:
         if _rank(np.vstack(blocks[:i] + blocks[i + 1:] or [np.zeros((1, 6))])) == rank
     ]
     members = sorted((entry.contact_class for entry in entries), key=CLASSES.index)
-    found = {item.members for item in enumerate_classes(max_contacts=max(6, len(names))).found}
     mobility = 6 - rank
     return Analysis(
         contacts=[entry.name for entry in entries],
@@ -68,7 +67,8 @@ def analyze(names: list[str]) -> Analysis:
         mobility=mobility,
         minimal=mobility == 0 and not redundant,
         redundant=redundant,
-        in_catalog=tuple(members) in found,
+        # Table V's own test, on the instances its search uses.
+        in_catalog=locates_minimally(members, class_wrenches(SEARCH_SEED, 6)),
         freedom=describe_freedom(np.vstack(blocks), instances) if mobility else [],
     )
 

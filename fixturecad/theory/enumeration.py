@@ -121,6 +121,18 @@ def _is_minimal(blocks, target_rank) -> bool:
     return True
 
 
+def locates_minimally(members, wrenches, target_rank=6) -> bool:
+    """Whether instances of the class multiset reach ``target_rank`` and every member is needed.
+
+    ``wrenches``: from :func:`class_wrenches`, with at least as many copies as
+    any class repeats; the i-th copy of a class stands for its i-th member.
+    """
+    if any(members.count(name) > len(wrenches[name]) for name in members):
+        return False
+    blocks = [wrenches[name][members[:i].count(name)] for i, name in enumerate(members)]
+    return _rank(np.vstack(blocks)) == target_rank and _is_minimal(blocks, target_rank)
+
+
 def _search(names, wrenches, target_rank, max_contacts, progress=None):
     """Minimal multisets (tuples of class names) whose wrench rank equals target_rank."""
     found = []
@@ -185,8 +197,7 @@ def enumerate_classes(
     check = class_wrenches(CHECK_SEED, copies)
     result = Enumeration(target_dim, max_contacts, filters, contacts_by_class=contacts_by_class)
     for members in _search(names, search, target_rank, max_contacts, progress):
-        blocks = [check[name][members[:i].count(name)] for i, name in enumerate(members)]
-        verified = _rank(np.vstack(blocks)) == target_rank and _is_minimal(blocks, target_rank)
+        verified = locates_minimally(members, check, target_rank)
         result.found.append(CombinationClass(members, combinations_of(members, contacts_by_class), verified))
     if target_dim == 0:
         by_rank = {item.members for item in result.found}
