@@ -254,7 +254,7 @@ class Problem:
     covariance is ``sigma_mm^2 I``.
     """
 
-    def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM):
+    def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM, tolerance=None):
         if not (lever_mm > 0 and np.isfinite(lever_mm)):
             raise ValueError(f"the sensor lever must be a positive number of mm, got {lever_mm}")
         self.groups = [g if g.centre is not None else _with_centre(g) for g in groups if g.count]
@@ -264,11 +264,18 @@ class Problem:
         # Rows are computed per contact type: groups of one type on different
         # features are stacked into one call of the contact model.
         self.batches = _merge(self.groups)
+        self.tolerance = tolerance if tolerance is not None and tolerance.size else None
+        self._row_feature = None
 
-    def evaluate(self, rotation, translation):
+    def _rows(self, rotation, translation, grow=0.0):
         values, jacobians = [], []
         for g in self.batches:
-            v, J = residuals_and_jacobian(g.ctype, g.sensor, g.fixture, rotation, translation, g.rho)
+            fixture, rho = g.fixture, g.rho
+            if grow and "r" in fixture.geometry:
+                # A grown sphere or cylinder: its radius, and the offset of the touches that include it.
+                fixture = type(fixture)(fixture.kind, fixture.fixed, {**fixture.geometry, "r": fixture["r"] + grow})
+                rho = rho + grow
+            v, J = residuals_and_jacobian(g.ctype, g.sensor, fixture, rotation, translation, rho)
             g.rows = v.shape[1]
             if not _point_sensor(g.sensor):
                 v, J = _whitened(v, J, g.centre, self.lever)
@@ -276,9 +283,35 @@ class Problem:
             jacobians.append(J.reshape(-1, 6))
         return np.concatenate(values), np.concatenate(jacobians)
 
+    def evaluate(self, rotation, translation):
+        r, J = self._rows(rotation, translation)
+        if self.tolerance is None:
+            return r, J
+        from scipy.linalg import cholesky, solve_triangular
+        from .deviations import deviation_rows
+
+        Jd = deviation_rows(self, self.tolerance, rotation, translation, J)
+        C = np.eye(len(r)) + Jd @ self.tolerance.covariance @ Jd.T / self.sigma**2
+        L = cholesky(C, lower=True)
+        return solve_triangular(L, r, lower=True), solve_triangular(L, J, lower=True)
+
+    def radius_derivative(self, rotation, translation, step=1e-4):
+        """How each (whitened) row changes as its feature's radius grows, shape (m,) per mm."""
+        grown = self._rows(rotation, translation, step)[0]
+        shrunk = self._rows(rotation, translation, -step)[0]
+        return (grown - shrunk) / (2 * step)
+
+    @property
+    def row_feature(self):
+        """The feature id of every row of ``evaluate``, shape (m,)."""
+        if self._row_feature is None:
+            feature_of = {int(i): g.feature.id for g in self.groups for i in g.index}
+            self._row_feature = np.array([feature_of[int(i)] for i in self.row_touch])
+        return self._row_feature
+
     def _count_rows(self):
         if any(not g.rows for g in self.batches):
-            self.evaluate(np.eye(3), np.zeros(3))
+            self._rows(np.eye(3), np.zeros(3))
 
     @property
     def row_touch(self):
@@ -333,7 +366,7 @@ class Problem:
                 groups.append(g)
             elif keep.any():
                 groups.append(_subset(g, keep))
-        return Problem(groups, self.sigma, self.lever)
+        return Problem(groups, self.sigma, self.lever, self.tolerance)
 
     def scale(self):
         """A length (mm) that balances rotation and translation columns of the Jacobian."""
@@ -1206,7 +1239,7 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
-                     contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM):
+                     contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM, tolerance=None):
     """Register a fixture from labelled touches; return the result dict (see module doc).
 
     Parameters
@@ -1236,7 +1269,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     ``pose``), ``touches``, ``rows``, ``rank``.
     """
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
-    problem = Problem(groups, sigma_mm, lever_mm)
+    problem = Problem(groups, sigma_mm, lever_mm, tolerance)
     if not problem.groups:
         raise ValueError("no touches given")
     solutions = solve(problem, initial_pose)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fixturecad.errors import InputError
+from fixturecad.registration.datums import DatumScheme
 
 # Gap between a mounting base and the nearest sensing patch, mm.
 BASE_CLEARANCE_MM = 1.0
@@ -120,6 +121,8 @@ class Template:
     PARAMS: tuple = ()
     contact_class: str = ""  # catalogue class of the default plan
     FRAME: str = ""  # where the fixture frame sits, in words (features.json "frame")
+    DATUMS: DatumScheme  # the features that fix the frame on the printed part
+    DATUM_TEXT: str = ""  # how each datum feature fixes the frame, in words
     # Two directions the preview looks from (towards the origin), chosen to show the sensing faces.
     VIEW_DIRECTIONS: tuple = ((1.0, -1.6, 1.1), (-1.0, 1.6, -1.1))
 

@@ -8,6 +8,7 @@ three sensing faces' planes meet, axes along the cube edges. Sensing:
 
 import numpy as np
 
+from fixturecad.registration.datums import DatumScheme
 from fixturecad.registration.features import Extent, Plane
 from fixturecad.templates.base import Anchor, Param, Plan, Template, box_halfspaces, touch
 
@@ -19,6 +20,9 @@ class Cube(Template):
     PARAMS = (Param("size", "mm", 50.0, 5.0, 1000.0, "edge length of the cube", "s"),)
     contact_class = "{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}"
     FRAME = "origin at the corner where the left (x = 0), front (y = 0) and bottom faces meet; axes along the edges; cube in [0, size]^3"
+    DATUMS = DatumScheme("planes", ("top", "front", "left"))
+    DATUM_TEXT = ("primary top (Z, and the tilts about X and Y), secondary front (Y, and the turn about Z), "
+                  "tertiary left (X); the origin is the corner of left, front and the face size below top")
     VIEW_DIRECTIONS = ((1.0, -1.6, 1.1), (-1.6, 0.7, 0.9))
 
     def body(self):

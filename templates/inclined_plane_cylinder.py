@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from fixturecad.registration.datums import DatumScheme
 from fixturecad.registration.features import Cylinder, Extent, Plane
 from fixturecad.templates.base import Anchor, Param, Plan, Template, halfspace, touch
 
@@ -34,6 +35,9 @@ class InclinedPlaneCylinder(Template):
     )
     contact_class = "{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}"
     FRAME = "paper Fig. 10: origin where the axis meets the plane, Z = s along the axis, Y = n x s, X = Y x Z"
+    DATUMS = DatumScheme("axis-plane", ("cylinder", "plane"))
+    DATUM_TEXT = ("the paper's Example Two: primary the cylinder (its axis is Z: X, Y and the tilts), "
+                  "secondary the plane (the origin where the axis meets it, Z; Y = n x Z fixes the turn about Z)")
     VIEW_DIRECTIONS = ((-1.0, -1.3, 1.0), (1.2, 1.0, -0.3))
 
     @property

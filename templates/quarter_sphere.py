@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from fixturecad.errors import InputError
+from fixturecad.registration.datums import DatumScheme
 from fixturecad.registration.features import Extent, Line, Plane, Sphere
 from fixturecad.templates.base import BASE_CLEARANCE_MM, Anchor, Param, Plan, Template, halfspace, touch, unit
 
@@ -37,6 +38,9 @@ class QuarterSphere(Template):
     PARAMS = (Param("radius", "mm", 40.0, 5.0, 500.0, "radius of the sphere", "r"),)
     contact_class = "{G3}{S-S}{S-T2}{C-R-C}"
     FRAME = "origin at the ball centre; X along the edge where the flats meet; flat_a in z = 0, flat_b in y = 0; material at y >= 0, z >= 0"
+    DATUMS = DatumScheme("planes-point", ("flat_a", "flat_b", "sphere"))
+    DATUM_TEXT = ("primary flat_a (Z, and the tilts about X and Y), secondary flat_b (Y, and the turn about Z), "
+                  "tertiary the sphere's centre (X): the origin is that centre dropped onto the edge where the flats meet")
     VIEW_DIRECTIONS = ((0.45, -1.0, -0.8), (0.45, 1.0, 0.9))
 
     def body(self):

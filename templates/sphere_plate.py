@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from fixturecad.errors import InputError
+from fixturecad.registration.datums import DatumScheme
 from fixturecad.registration.features import Extent, Sphere
 from fixturecad.templates.base import Anchor, Param, Plan, Template, halfspace, touch
 
@@ -33,6 +34,9 @@ class SpherePlate(Template):
     )
     contact_class = "{S-S}{S-S}{S-S}{S-S}{S-S}{S-S}"
     FRAME = "origin at the centre of the plate top face, Z up; ball k at azimuth 90 + 120 (k - 1) deg"
+    DATUMS = DatumScheme("points", ("ball_1", "ball_2", "ball_3"))
+    DATUM_TEXT = ("primary ball_1's centre (X, Y, Z), secondary ball_2's centre (the direction from ball_1: "
+                  "two turns), tertiary ball_3's centre (the turn about that line)")
     VIEW_DIRECTIONS = ((1.0, -1.6, 1.1), (-1.0, 1.4, 1.2))
 
     def check(self) -> None:

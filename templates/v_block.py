@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from fixturecad.errors import InputError
+from fixturecad.registration.datums import DatumScheme
 from fixturecad.registration.features import Extent, Plane
 from fixturecad.templates.base import Anchor, Param, Plan, Template, halfspace, touch
 
@@ -30,6 +31,9 @@ class VBlock(Template):
     )
     contact_class = "{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}"
     FRAME = "origin on the end face at the top, above the groove bottom line; X along the groove, Z up; block in x [0, size], z [-size, 0]"
+    DATUMS = DatumScheme("planes", ("groove_a", "groove_b", "end"))
+    DATUM_TEXT = ("primary groove_a (its offset and tilts), secondary groove_b (with groove_a: the groove's bottom "
+                  "line and the turn about it), tertiary end (X: where the origin lies along the groove)")
     VIEW_DIRECTIONS = ((-1.2, -0.9, 1.2), (-1.2, 0.9, 1.2))
 
     @property

@@ -1,0 +1,133 @@
+"""The printed part's deviations as nuisance parameters of the registration.
+
+Every feature's deviation modes (:mod:`.tolerance`) get a covariance *as
+seen from the datum frame* (:mod:`.datums`): a deviation that only moves the
+frame is no deviation at all, and the datum features' own deviations show
+up in the others. Touches on one feature share its deviation, so their rows
+are correlated: the rows' covariance becomes ``sigma^2 I + J_d S J_d^T``
+with ``J_d`` the rows' change with each mode and ``S`` the modes'
+covariance, and the rows are whitened by it (generalised least squares).
+The modes are thereby marginalised: the pose covariance includes them.
+
+This module imports numpy and scipy only and nothing of fixturecad: it is
+inlined into the generated standalone ``register.py``.
+"""
+
+import numpy as np
+
+from .pose import vector_from_rotation
+from .tolerance import coordinates, deviated, modes, motion_from_twist, moved, random_coordinates
+
+STEP = 1e-6  # finite-difference step of the linearised datum and mode maps (mm, rad)
+
+
+class FixtureTolerance:
+    """Every feature's deviation modes, with their covariance as seen from the datum frame.
+
+    ``features`` dict id -> nominal feature; ``scheme`` the DatumScheme;
+    ``zone_mm`` the profile tolerance zone width; or, for an as-built part,
+    ``covariances`` dict id -> (k, k) covariance of every feature's mode
+    coordinates from its calibration, already in the datum frame.
+    """
+
+    def __init__(self, features, scheme, zone_mm, covariances=None):
+        if not (zone_mm >= 0 and np.isfinite(zone_mm)):
+            raise ValueError(f"the fixture tolerance must be a non-negative number of mm, got {zone_mm}")
+        scheme.check(features)
+        self.features = features
+        self.scheme = scheme
+        self.zone_mm = float(zone_mm)
+        self.modes = {fid: modes(f) for fid, f in features.items()}
+        self.slices, start = {}, 0
+        for fid, m in self.modes.items():
+            self.slices[fid] = slice(start, start + len(m.names))
+            start += len(m.names)
+        self.size = start
+        self.projection = self._gauge_projection()
+        if covariances is None:
+            prior = np.zeros((start, start))
+            for fid, m in self.modes.items():
+                prior[self.slices[fid], self.slices[fid]] = np.diag(m.sigma(zone_mm) ** 2)
+            self.covariance = self.projection @ prior @ self.projection.T
+        else:
+            # A calibration states its covariances in the datum frame already.
+            self.covariance = np.zeros((start, start))
+            for fid, s in self.slices.items():
+                self.covariance[s, s] = np.asarray(covariances[fid], float)
+
+    def _gauge_projection(self):
+        """P (K, K): mode coordinates of the printed part -> the same seen from its datum frame.
+
+        C (6, K) is how the datum frame moves with each mode; M (K, 6) how the
+        modes change when the whole part moves rigidly. Seen from the datum
+        frame, the part has moved back by C delta: delta' = (I - M (C M)^-1 C) delta.
+        """
+        nominal = self.features
+        C = np.zeros((6, self.size))
+        M = np.zeros((self.size, 6))
+        try:
+            D0 = self.scheme.frame(nominal)
+        except np.linalg.LinAlgError:
+            D0 = np.full((4, 4), np.nan)
+        if not np.all(np.isfinite(D0)):
+            raise ValueError(f"the datum features {', '.join(self.scheme.features)} do not fix the frame")
+        for fid, m in self.modes.items():
+            s = self.slices[fid]
+            for j in range(len(m.names)):
+                columns = []
+                for sign in (1.0, -1.0):
+                    delta = np.zeros(len(m.names))
+                    delta[j] = sign * STEP
+                    changed = dict(nominal)
+                    changed[fid] = deviated(m, delta)
+                    D = self.scheme.frame(changed) @ np.linalg.inv(D0)
+                    columns.append(np.concatenate([vector_from_rotation(D[:3, :3]), D[:3, 3]]))
+                C[:, s.start + j] = (columns[0] - columns[1]) / (2 * STEP)
+        for k in range(6):
+            rows = []
+            for sign in (1.0, -1.0):
+                R, t = motion_from_twist(sign * STEP * np.eye(6)[k])
+                rows.append(np.concatenate([coordinates(m, moved(nominal[fid], R, t)) for fid, m in self.modes.items()]))
+            M[:, k] = (rows[0] - rows[1]) / (2 * STEP)
+        CM = C @ M
+        if np.linalg.matrix_rank(CM, tol=1e-6) < 6:
+            raise ValueError(f"the datum features {', '.join(self.scheme.features)} do not fix the frame")
+        return np.eye(self.size) - M @ np.linalg.solve(CM, C)
+
+    def random_part(self, rng, zone_mm=None):
+        """A printed part (dict id -> feature, nominal frame) with every mode uniform over its range."""
+        zone = self.zone_mm if zone_mm is None else zone_mm
+        return {fid: deviated(m, random_coordinates(m, zone, rng)) for fid, m in self.modes.items()}
+
+    def feature_twists(self, fid, rotation, translation):
+        """The mode twists (k, 6) of one feature mapped into the measurement frame at a pose.
+
+        A fixture-frame twist (w, v) is the measurement-frame twist
+        (R w, R v + t x R w).
+        """
+        twists = self.modes[fid].twists
+        w = twists[:, :3] @ rotation.T
+        v = twists[:, 3:] @ rotation.T + np.cross(translation, w)
+        return np.hstack([w, v])
+
+
+def deviation_rows(problem, tolerance, rotation, translation, jacobian):
+    """J_d (m, K): how the problem's (whitened) rows change with every mode coordinate at a pose.
+
+    A mode moves one feature rigidly: its rows change as the fixture's rows
+    do under that twist (``jacobian``, the rows' twist Jacobian), the rows of
+    other features not at all. A radius mode grows the feature.
+    """
+    row_feature = problem.row_feature
+    Jd = np.zeros((len(jacobian), tolerance.size))
+    drho = None
+    for fid, s in tolerance.slices.items():
+        rows = row_feature == fid
+        if not rows.any():
+            continue
+        m = tolerance.modes[fid]
+        Jd[np.ix_(rows, range(s.start, s.stop))] = jacobian[rows] @ tolerance.feature_twists(fid, rotation, translation).T
+        if m.radius.any():
+            drho = problem.radius_derivative(rotation, translation) if drho is None else drho
+            Jd[np.ix_(rows, s.start + np.flatnonzero(m.radius))] = drho[rows][:, None]
+    return Jd
