@@ -18,7 +18,7 @@ import numpy as np
 from .deviations import FixtureTolerance, deviation_rows
 from .engine import Problem, build_groups, solve
 from .pose import apply_twist
-from .tolerance import deviated
+from .tolerance import departure_mm, deviated
 
 ITERATIONS = 12  # Gauss-Newton steps at most; it converges in three or four
 CONVERGED = 1e-9  # a step this small (mm, rad at the part's size) ends the iteration
@@ -112,7 +112,7 @@ def calibrate(features, scheme, points, sigma_mm, zone_mm, rows=None):
         out.deviations[fid] = delta[sl]
         out.covariances[fid] = delta_cov[sl, sl]
         out.features[fid] = current[fid]
-        out.worst_mm[fid] = _worst_departure(features[fid], current[fid])
+        out.worst_mm[fid] = departure_mm(features[fid], current[fid])
     out.fixture2meas[:3, :3], out.fixture2meas[:3, 3] = R, t
     return out
 
@@ -162,10 +162,3 @@ def _check_on_fixture(problem, r, points, rows, zone_mm):
         raise ValueError(f"{where} lies {distance:.3g} mm from {feature_of[touch]} after the fit: "
                          "these points are not from this fixture, or the feature ids are wrong")
 
-
-def _worst_departure(nominal, actual):
-    """The largest distance (mm) between the nominal patch and the as-built surface over the patch."""
-    from .patches import patch_points
-
-    pts = patch_points(nominal)
-    return float(np.abs(actual.signed_distance(pts)).max())

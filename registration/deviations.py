@@ -19,6 +19,7 @@ from .pose import vector_from_rotation
 from .tolerance import coordinates, deviated, modes, motion_from_twist, moved, random_coordinates
 
 STEP = 1e-6  # finite-difference step of the linearised datum and mode maps (mm, rad)
+FREED_ZONE_MM = 20.0  # the zone of a feature let free: far beyond any print, within linearity
 
 
 class FixtureTolerance:
@@ -28,9 +29,11 @@ class FixtureTolerance:
     ``zone_mm`` the profile tolerance zone width; or, for an as-built part,
     ``covariances`` dict id -> (k, k) covariance of every feature's mode
     coordinates from its calibration, already in the datum frame.
+    ``widened``: (feature id, mode index) pairs let free (their zone
+    ``FREED_ZONE_MM``), to test whether one of them explains the touches.
     """
 
-    def __init__(self, features, scheme, zone_mm, covariances=None):
+    def __init__(self, features, scheme, zone_mm, covariances=None, widened=()):
         if not (zone_mm >= 0 and np.isfinite(zone_mm)):
             raise ValueError(f"the fixture tolerance must be a non-negative number of mm, got {zone_mm}")
         scheme.check(features)
@@ -47,13 +50,22 @@ class FixtureTolerance:
         if covariances is None:
             prior = np.zeros((start, start))
             for fid, m in self.modes.items():
-                prior[self.slices[fid], self.slices[fid]] = np.diag(m.sigma(zone_mm) ** 2)
+                zones = [FREED_ZONE_MM if (fid, k) in widened else zone_mm for k in range(len(m.names))]
+                prior[self.slices[fid], self.slices[fid]] = np.diag((m.sigma(1.0) * zones) ** 2)
             self.covariance = self.projection @ prior @ self.projection.T
         else:
             # A calibration states its covariances in the datum frame already.
             self.covariance = np.zeros((start, start))
             for fid, s in self.slices.items():
                 self.covariance[s, s] = np.asarray(covariances[fid], float)
+                freed = [k for k in range(s.stop - s.start) if (fid, k) in widened]
+                self.covariance[s.start + np.array(freed, int), s.start + np.array(freed, int)] += \
+                    self.modes[fid].sigma(FREED_ZONE_MM)[freed] ** 2
+        self._given = covariances
+
+    def widened(self, fid, mode):
+        """The same tolerance with one mode (index) of feature ``fid`` let free."""
+        return FixtureTolerance(self.features, self.scheme, self.zone_mm, self._given, ((fid, mode),))
 
     def _gauge_projection(self):
         """P (K, K): mode coordinates of the printed part -> the same seen from its datum frame.
@@ -131,3 +143,11 @@ def deviation_rows(problem, tolerance, rotation, translation, jacobian):
             drho = problem.radius_derivative(rotation, translation) if drho is None else drho
             Jd[np.ix_(rows, s.start + np.flatnonzero(m.radius))] = drho[rows][:, None]
     return Jd
+
+
+def estimated_deviations(problem, tolerance, rotation, translation):
+    """The mode coordinates (K,) the touches suggest at a pose: S J_d^T C^-1 r (best linear estimate)."""
+    r, J = problem.sensor_rows(rotation, translation)
+    Jd = deviation_rows(problem, tolerance, rotation, translation, J)
+    C = problem.sigma**2 * np.eye(len(r)) + Jd @ tolerance.covariance @ Jd.T
+    return tolerance.covariance @ Jd.T @ np.linalg.solve(C, -r)

@@ -267,7 +267,8 @@ class Problem:
         self.tolerance = tolerance if tolerance is not None and tolerance.size else None
         self._row_feature = None
 
-    def _rows(self, rotation, translation, grow=0.0):
+    def sensor_rows(self, rotation, translation, grow=0.0):
+        """Rows and Jacobian whitened for the sensor noise only (the fixture's deviations left in)."""
         values, jacobians = [], []
         for g in self.batches:
             fixture, rho = g.fixture, g.rho
@@ -284,7 +285,7 @@ class Problem:
         return np.concatenate(values), np.concatenate(jacobians)
 
     def evaluate(self, rotation, translation):
-        r, J = self._rows(rotation, translation)
+        r, J = self.sensor_rows(rotation, translation)
         if self.tolerance is None:
             return r, J
         from scipy.linalg import cholesky, solve_triangular
@@ -297,8 +298,8 @@ class Problem:
 
     def radius_derivative(self, rotation, translation, step=1e-4):
         """How each (whitened) row changes as its feature's radius grows, shape (m,) per mm."""
-        grown = self._rows(rotation, translation, step)[0]
-        shrunk = self._rows(rotation, translation, -step)[0]
+        grown = self.sensor_rows(rotation, translation, step)[0]
+        shrunk = self.sensor_rows(rotation, translation, -step)[0]
         return (grown - shrunk) / (2 * step)
 
     @property
@@ -311,7 +312,7 @@ class Problem:
 
     def _count_rows(self):
         if any(not g.rows for g in self.batches):
-            self._rows(np.eye(3), np.zeros(3))
+            self.sensor_rows(np.eye(3), np.zeros(3))
 
     @property
     def row_touch(self):
@@ -1001,6 +1002,39 @@ def robust_flag(problem, solution):
     return None
 
 
+def features_beyond_tolerance(problem, solutions, starts=4):
+    """Feature deviations beyond the tolerance that explain touches failing the residual test.
+
+    Each mode of each touched feature is let free in turn
+    (:meth:`FixtureTolerance.widened`) and the pose refitted from each of the
+    best ``starts`` solutions; a mode is named when a refit passes. Returns [(feature id, mode name, its estimated
+    coordinate mm or rad, the feature's departure from the drawing mm, refit
+    Solution)] of the modes whose departure leaves the zone, the smallest first.
+    """
+    from .deviations import estimated_deviations
+    from .tolerance import deviated, departure_mm
+
+    found = []
+    length = problem.scale()
+    for fid in dict.fromkeys(g.feature.id for g in problem.groups):
+        modes = problem.tolerance.modes[fid]
+        for k, name in enumerate(modes.names):
+            tolerance = problem.tolerance.widened(fid, k)
+            freed = Problem(problem.groups, problem.sigma, problem.lever, tolerance)
+            for solution in solutions[:starts]:
+                R, t, r, J = levenberg_marquardt(freed, solution.rotation, solution.translation)
+                refit = _judged(freed, Solution(R, t, r, J), length)
+                if refit.passes and refit.admissible and refit.rank == 6:
+                    break
+            else:
+                continue
+            delta = estimated_deviations(freed, tolerance, R, t)[tolerance.slices[fid]]
+            departure = departure_mm(tolerance.features[fid], deviated(modes, delta))
+            if departure > problem.tolerance.zone_mm / 2:
+                found.append((fid, name, float(delta[k]), departure, refit))
+    return sorted(found, key=lambda item: item[3])
+
+
 # ---------------------------------------------------------------- free motions
 
 
@@ -1274,7 +1308,8 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         raise ValueError("no touches given")
     solutions = solve(problem, initial_pose)
     best = solutions[0]
-    result = {"flagged": [], "free_motions": [], "separating_touch": None, "inadmissible": best.outside}
+    result = {"flagged": [], "fixture_flagged": [], "free_motions": [], "separating_touch": None,
+              "inadmissible": best.outside}
     good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
     if best.rank < 6:
         status = "underdetermined"
@@ -1288,8 +1323,14 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         result["separating_touch"] = separating_touch(features, good)
     else:
         status = "inconsistent"
-        flagged = robust_flag(problem, best) if problem.size > 7 else None
-        if flagged is not None:
+        off = features_beyond_tolerance(problem, solutions) if problem.tolerance is not None else []
+        flagged = None if off else (robust_flag(problem, best) if problem.size > 7 else None)
+        if off:
+            result["fixture_flagged"] = [{"feature": fid, "mode": mode, "deviation": value, "departure_mm": mm}
+                                         for fid, mode, value, mm, _ in off]
+            best = off[0][-1]
+            good = [item[-1] for item in off]
+        elif flagged is not None:
             touch, refit, size = flagged
             feature_of = {int(i): g.feature.id for g in groups for i in g.index}
             result["flagged"] = [{"touch": touch, "feature": feature_of[touch], "residual_mm": size}]

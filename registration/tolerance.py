@@ -211,3 +211,10 @@ def random_coordinates(mode_set: Modes, zone_mm, rng):
     a = mode_set.half_range * zone_mm
     return rng.uniform(-a, a)
 
+
+
+def departure_mm(nominal, actual):
+    """The largest distance (mm) of the actual surface from the nominal one over the nominal patch."""
+    from .patches import patch_points
+
+    return float(np.abs(actual.signed_distance(patch_points(nominal))).max())

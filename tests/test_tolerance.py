@@ -186,3 +186,33 @@ def test_reported_covariance_is_honest_on_a_printed_part(name):
     sigma is within [0.5, 2] x the RMS error, and at most 2 % are called inconsistent."""
     coverage, ratio, inconsistent = _covariance_check(name, 0.1, 150, 9)
     assert coverage >= 0.9 and 0.5 <= ratio <= 2.0 and inconsistent <= 0.02
+
+
+@pytest.mark.parametrize("name, fid, mode, amount", [
+    ("quarter-sphere", "sphere", "radius_mm", 1.0),
+    ("inclined-plane-cylinder", "cylinder", "radius_mm", 0.5),
+    ("sphere-plate", "ball_2", "radius_mm", 0.5),
+])
+def test_a_feature_beyond_its_tolerance_is_named(name, fid, mode, amount):
+    """A printed feature far outside the zone makes the touches inconsistent, and the smallest
+    deviation that explains them is that feature's, with its size."""
+    from fixturecad.registration.engine import register_touches
+
+    template, features = nominal(name)
+    tolerance = FixtureTolerance(features, template.DATUMS, 0.1)
+    m = tolerance.modes[fid]
+    part = dict(features, **{fid: deviated(m, amount * (np.array(m.names) == mode))})
+    plans = template.touch_plans()
+    entries = [e for e in plans.get("point-probe", plans["default"]).touches if "sensor" not in e]
+    rng = np.random.default_rng(0)
+    truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-100, 100, 3))
+    touches = {}
+    for entry in entries:
+        printed = part[entry["feature"]].closest_point(np.asarray(entry["points"], float).reshape(-1, 3))
+        touches.setdefault(entry["feature"], []).extend(
+            printed @ truth[:3, :3].T + truth[:3, 3] + rng.normal(scale=0.005, size=printed.shape))
+    result = register_touches(features, touches, sigma_mm=0.005, tolerance=tolerance)
+    assert result["status"] == "inconsistent"
+    first = result["fixture_flagged"][0]
+    assert (first["feature"], first["mode"]) == (fid, mode)
+    assert first["departure_mm"] == pytest.approx(amount, rel=0.05)
