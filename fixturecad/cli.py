@@ -9,6 +9,7 @@ import sys
 
 import typer
 
+from fixturecad.calibration_commands import app as calibration_app
 from fixturecad.errors import InputError
 from fixturecad.fixture_commands import app as fixture_app
 from fixturecad.registration_commands import app as registration_app
@@ -21,7 +22,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-for group in (theory_app, fixture_app, registration_app):
+for group in (theory_app, fixture_app, registration_app, calibration_app):
     app.add_typer(group)
 
 

@@ -38,7 +38,8 @@ class Calibration:
     ``counts`` dict id -> number of points; ``worst_mm`` dict id -> the
     largest distance of the as-built patch from the nominal one;
     ``sigma_mm`` the noise the covariance assumes (the stated sigma or the
-    residual RMS, whichever is larger).
+    residual RMS, whichever is larger); ``mode_names`` dict id -> the names
+    of the deviation coordinates.
     """
 
     features: dict
@@ -49,6 +50,7 @@ class Calibration:
     counts: dict
     worst_mm: dict
     sigma_mm: float
+    mode_names: dict
 
 
 def calibrate(features, scheme, points, sigma_mm, zone_mm, rows=None):
@@ -61,7 +63,7 @@ def calibrate(features, scheme, points, sigma_mm, zone_mm, rows=None):
     points : dict id -> array-like, shape (n, 3), mm, any frame
     sigma_mm : float, measurement noise (mm, each axis)
     zone_mm : float, the recorded tolerance zone (only for the first pose)
-    rows : dict id -> (n,) file row numbers of the points, for messages
+    rows : dict id -> file line numbers of the points, for messages
 
     Raises ValueError (one line) when a feature is not measured, its points
     leave a mode undetermined, or the points do not lie on this fixture.
@@ -107,7 +109,8 @@ def calibrate(features, scheme, points, sigma_mm, zone_mm, rows=None):
     covariance = noise**2 * np.linalg.inv(A.T @ A)
     delta = basis @ z
     delta_cov = basis @ covariance[6:, 6:] @ basis.T
-    out = Calibration({}, {}, {}, np.eye(4), rms, {fid: len(p) for fid, p in points.items()}, {}, noise)
+    out = Calibration({}, {}, {}, np.eye(4), rms, {fid: len(p) for fid, p in points.items()}, {}, noise,
+                      {fid: m.names for fid, m in tolerance.modes.items()})
     for fid, sl in tolerance.slices.items():
         out.deviations[fid] = delta[sl]
         out.covariances[fid] = delta_cov[sl, sl]

@@ -15,6 +15,7 @@ inlined into the generated standalone ``register.py``.
 
 import numpy as np
 
+from .datums import frame_change
 from .pose import vector_from_rotation
 from .tolerance import coordinates, deviated, modes, motion_from_twist, moved, random_coordinates
 
@@ -106,10 +107,48 @@ class FixtureTolerance:
             raise ValueError(f"the datum features {', '.join(self.scheme.features)} do not fix the frame")
         return np.eye(self.size) - M @ np.linalg.solve(CM, C)
 
+    def random_deviations(self, rng, zone_mm=None):
+        """A printed part's mode coordinates (dict id -> (k,)), each uniform over its range."""
+        zone = self.zone_mm if zone_mm is None else zone_mm
+        return {fid: random_coordinates(m, zone, rng) for fid, m in self.modes.items()}
+
+    def part(self, deviations):
+        """The printed features (dict id -> feature, nominal frame) of given mode coordinates."""
+        return {fid: deviated(self.modes[fid], deviations[fid]) for fid in self.modes}
+
     def random_part(self, rng, zone_mm=None):
         """A printed part (dict id -> feature, nominal frame) with every mode uniform over its range."""
-        zone = self.zone_mm if zone_mm is None else zone_mm
-        return {fid: deviated(m, random_coordinates(m, zone, rng)) for fid, m in self.modes.items()}
+        return self.part(self.random_deviations(rng, zone_mm))
+
+    def frame_change(self, deviations):
+        """The printed part's datum frame in the nominal frame (4, 4), see :func:`.datums.frame_change`."""
+        return frame_change(self.scheme, self.features, self.part(deviations))
+
+    def printed_entry(self, entry, deviations):
+        """A touch-plan entry (fixture frame) made on the printed part instead of the drawing.
+
+        Point touches go to the nearest point of the printed surface; a
+        sensor moves with its feature, and off a grown sphere or cylinder.
+        """
+        fid = entry["feature"]
+        m, c = self.modes[fid], np.asarray(deviations[fid], float)
+        printed = deviated(m, c)
+        points = np.asarray(entry["points"], float).reshape(-1, 3)
+        if "sensor" not in entry:
+            return {**entry, "points": printed.closest_point(points).tolist()}
+        R, t = motion_from_twist(c @ m.twists)
+        grow = float(c @ m.radius)
+        points = points @ R.T + t
+        points = points + grow * printed.normal_at(points)
+        sensor = dict(entry["sensor"])
+        for key in ("point", "center"):
+            if key in sensor:
+                moved_point = R @ np.asarray(sensor[key], float) + t
+                sensor[key] = (moved_point + grow * printed.normal_at(moved_point)[0]).tolist()
+        for key in ("normal", "direction", "axis"):
+            if key in sensor:
+                sensor[key] = (R @ np.asarray(sensor[key], float)).tolist()
+        return {**entry, "points": points.tolist(), "sensor": sensor}
 
     def feature_twists(self, fid, rotation, translation):
         """The mode twists (k, 6) of one feature mapped into the measurement frame at a pose.

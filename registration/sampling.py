@@ -85,8 +85,9 @@ def closest_on_faces(mesh, faces, points):
 class TouchSampler:
     """Draws noisy touches of a touch plan on the STL of a fixture."""
 
-    def __init__(self, document, mesh, plan="default", random_positions=False):
+    def __init__(self, document, mesh, plan="default", random_positions=False, tolerance=None):
         self.features = {entry["id"]: feature_from_json(entry) for entry in document["features"]}
+        self.tolerance = tolerance  # the FixtureTolerance printed parts are drawn from
         self.entries = plan_entries(document, plan)
         self.mesh = mesh
         self.random_positions = random_positions
@@ -121,16 +122,24 @@ class TouchSampler:
             out.append({**entry, "points": np.asarray(points).tolist()})
         return out
 
-    def draw(self, rng, noise_mm, fixture2meas=None, lever_mm=SENSOR_LEVER_MM):
+    def draw(self, rng, noise_mm, fixture2meas=None, lever_mm=SENSOR_LEVER_MM, printed=None):
         """(touches by feature, contacts, true fixture2meas), sensors placed with noise ``noise_mm``.
 
         The engine's sensor noise model (:func:`perturb_touches`): translation
         ``noise_mm``, rotation ``noise_mm / lever_mm`` about each contact point.
+        ``printed``: a printed part (:meth:`FixtureTolerance.random_deviations`,
+        dict id -> mode coordinates) the touches are made on; the true pose is
+        then that of its datum frame.
         """
         if fixture2meas is None:
             fixture2meas = fixture2meas_from_rt(
                 random_rotation(rng), rng.uniform(-POSE_TRANSLATION_RANGE_MM, POSE_TRANSLATION_RANGE_MM, 3)
             )
-        touches, contacts = plan_touches(self.fixture_entries(rng), fixture2meas)
+        entries = self.fixture_entries(rng)
+        truth = fixture2meas
+        if printed is not None:
+            entries = [self.tolerance.printed_entry(entry, printed) for entry in entries]
+            truth = fixture2meas @ self.tolerance.frame_change(printed)
+        touches, contacts = plan_touches(entries, fixture2meas)
         touches, contacts = perturb_touches(touches, contacts, rng, noise_mm, lever_mm)
-        return touches, contacts, fixture2meas
+        return touches, contacts, truth

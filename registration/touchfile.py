@@ -31,7 +31,8 @@ MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
 
 
 def read_touch_csv(text, feature_ids):
-    """Touches and approach directions by feature id, arrays (n, 3), from CSV text."""
+    """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
+    file line of every touch by feature id (lists)."""
     if not text.strip():
         raise ValueError("the touch file is empty")
     rows = list(csv.reader(io.StringIO(text)))
@@ -42,7 +43,7 @@ def read_touch_csv(text, feature_ids):
             f"{','.join(APPROACH_COLUMNS)}), got {','.join(header)}"
         )
     width = len(header)
-    touches, approaches = {}, {}
+    touches, approaches, lines = {}, {}, {}
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not cell.strip() for cell in row):
             continue
@@ -57,10 +58,11 @@ def read_touch_csv(text, feature_ids):
             raise ValueError(f"line {line}: coordinates must be finite, got {','.join(row[1:])}")
         touches.setdefault(row[0].strip(), []).append(values[:3])
         approaches.setdefault(row[0].strip(), []).append(values[3:] or [np.nan] * 3)
+        lines.setdefault(row[0].strip(), []).append(line)
     if not touches:
         raise ValueError("the touch file has a header but no touches")
     arrays = {key: np.array(value) for key, value in approaches.items()}
-    return {key: np.array(value) for key, value in touches.items()}, (arrays if width == 7 else {})
+    return {key: np.array(value) for key, value in touches.items()}, (arrays if width == 7 else {}), lines
 
 
 def read_touch_json(text, feature_ids):
@@ -128,7 +130,7 @@ def read_touch_file(path, feature_ids):
         raise ValueError(f"cannot read touch file {path}: {error.strerror}") from None
     if str(path).lower().endswith(".json"):
         return read_touch_json(text, feature_ids)
-    touches, approaches = read_touch_csv(text, feature_ids)
+    touches, approaches, _ = read_touch_csv(text, feature_ids)
     return touches, [], 0.0, approaches
 
 

@@ -192,10 +192,10 @@ def test_touch_csv_may_carry_the_probe_approach(tmp_path):
     from fixturecad.registration.touchfile import read_touch_csv
 
     text = "feature,x,y,z,ax,ay,az\ntop,1,2,3,0,0,-1\ntop,4,5,6,0,0,-1\n"
-    touches, approaches = read_touch_csv(text, ["top"])
+    touches, approaches, _ = read_touch_csv(text, ["top"])
     assert touches["top"].shape == (2, 3)
     assert approaches["top"].tolist() == [[0, 0, -1], [0, 0, -1]]
-    touches, approaches = read_touch_csv("feature,x,y,z\ntop,1,2,3\n", ["top"])
+    touches, approaches, _ = read_touch_csv("feature,x,y,z\ntop,1,2,3\n", ["top"])
     assert approaches == {}
     with pytest.raises(ValueError, match="expected 7 values"):
         read_touch_csv("feature,x,y,z,ax,ay,az\ntop,1,2,3\n", ["top"])
