@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from fixturecad.errors import InputError
+from fixturecad.registration.tolerance import DEFAULT_ZONE_MM
 
 if TYPE_CHECKING:
     from fixturecad.templates.base import Template
@@ -27,6 +28,10 @@ VOLUME_RELATIVE_TOLERANCE = 1e-6
 # Chord tolerance of the STL tessellation unless asked otherwise, and the accepted range, mm.
 DEFAULT_STL_TOLERANCE_MM = 0.01
 STL_TOLERANCE_RANGE_MM = (1e-4, 1.0)
+# The recorded manufacturing tolerance: its meaning, and the widest zone accepted (a print that bad is no fixture).
+TOLERANCE_DEFINITION = ("ISO 1101 profile tolerance of every sensing patch: each point of the printed patch "
+                        "lies within +-zone_mm/2 of its nominal surface; 0: the part is exact")
+FIXTURE_TOLERANCE_LIMIT_MM = 2.0
 # Chord tolerance of the preview tessellation, as a fraction of the fixture size.
 PREVIEW_CHORD_FRACTION = 0.004
 
@@ -51,7 +56,14 @@ def check_stl_tolerance(value: float) -> float:
     return value
 
 
-def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM) -> dict:
+def check_fixture_tolerance(value: float) -> float:
+    if not (math.isfinite(value) and 0.0 <= value <= FIXTURE_TOLERANCE_LIMIT_MM):
+        raise InputError(f"--fixture-tolerance must be between 0 and {FIXTURE_TOLERANCE_LIMIT_MM:g} mm, got {value!r}")
+    return value
+
+
+def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM,
+                      fixture_tolerance: float = DEFAULT_ZONE_MM) -> dict:
     """The features.json content of a template instance (no CAD needed)."""
     from importlib.metadata import version
 
@@ -64,6 +76,8 @@ def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_T
         "parameters": template.parameters_json(),
         "contact_class": template.contact_class,
         "frame": template.FRAME,
+        "datums": template.DATUMS.to_json(template.DATUM_TEXT),
+        "tolerance": {"zone_mm": fixture_tolerance, "definition": TOLERANCE_DEFINITION},
         "volume_mm3": template.volume(),
         "files": {"step": FILES["step"], "stl": FILES["stl"], "stl_tolerance_mm": stl_tolerance,
                   "preview": FILES["preview"]},
@@ -79,11 +93,12 @@ def default_target(template: "Template", out_root: Path | None = None) -> Path:
 
 
 def build(template: "Template", target: Path, force: bool = False,
-          stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM) -> Path:
+          stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM, fixture_tolerance: float = DEFAULT_ZONE_MM) -> Path:
     """Write the fixture folder ``target``; return it. InputError if it exists and not ``force``."""
     from fixturecad.sideprocess import SideProcess
 
     check_stl_tolerance(stl_tolerance)
+    check_fixture_tolerance(fixture_tolerance)
     target = Path(target)
     if target.exists() and not force:
         raise InputError(f"{target} already exists; pass --force to replace it")
@@ -92,7 +107,7 @@ def build(template: "Template", target: Path, force: bool = False,
     staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
     side = SideProcess(staging)  # imports matplotlib and scipy while we import cadquery
     try:
-        _write_all(template, staging, stl_tolerance, side)
+        _write_all(template, staging, stl_tolerance, fixture_tolerance, side)
         _move_into_place(staging, target)
     except BaseException:
         side.cancel()
@@ -101,7 +116,7 @@ def build(template: "Template", target: Path, force: bool = False,
     return target
 
 
-def _write_all(template: "Template", folder: Path, stl_tolerance: float, side) -> None:
+def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture_tolerance: float, side) -> None:
     from fixturecad.brep import match_features
     from fixturecad.mesh import mesh_from_shape, triangulate, write_stl
 
@@ -116,7 +131,7 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, side) -
 
     size = max(shape.BoundingBox().xlen, shape.BoundingBox().ylen, shape.BoundingBox().zlen)
     parts = triangulate(shape, PREVIEW_CHORD_FRACTION * size)
-    document = features_document(template, stl_tolerance)
+    document = features_document(template, stl_tolerance, fixture_tolerance)
     (folder / FILES["features"]).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     # the side process draws preview.png and writes register.py while we write STEP and STL
     side.send(_scene(template, features, matches, parts), folder / FILES["preview"],

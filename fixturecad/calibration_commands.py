@@ -85,6 +85,7 @@ def _as_built_document(document, result, measurements: Path, zone_mm: float) -> 
             "covariance": result.covariances[fid].tolist(),
         }
     calibration = {
+        "drawing": document["features"],
         "source": str(measurements),
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "sigma_mm": result.sigma_mm,

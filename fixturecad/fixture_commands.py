@@ -12,6 +12,7 @@ from typing import Annotated
 import typer
 
 from fixturecad.build import DEFAULT_STL_TOLERANCE_MM, STL_TOLERANCE_RANGE_MM
+from fixturecad.registration.tolerance import DEFAULT_ZONE_MM
 from fixturecad.errors import InputError
 from fixturecad.output import Format, render
 
@@ -55,19 +56,25 @@ def build(
     stl_tolerance: Annotated[float, typer.Option(
         help=f"STL chord tolerance, mm ({STL_TOLERANCE_RANGE_MM[0]:g} .. {STL_TOLERANCE_RANGE_MM[1]:g}).")
     ] = DEFAULT_STL_TOLERANCE_MM,
+    fixture_tolerance: Annotated[float, typer.Option(
+        help="Manufacturing tolerance of the printed part, mm: the width of the profile zone every sensing "
+             "point lies in (0: an exact part). Recorded in features.json; registration allows for it.")
+    ] = DEFAULT_ZONE_MM,
 ):
     """Build a fixture: fixture.step, fixture.stl, features.json, preview.png and a standalone register.py.
 
     Template parameters follow as options, e.g. `fixturecad build quarter-sphere --radius 40`.
     """
-    from fixturecad.build import build as build_fixture, check_stl_tolerance, default_target
+    from fixturecad.build import build as build_fixture, check_fixture_tolerance, check_stl_tolerance, default_target
     from fixturecad.templates import make
 
     values = parse_template_options(template, list(ctx.args))
     check_stl_tolerance(stl_tolerance)
+    check_fixture_tolerance(fixture_tolerance)
     fixture = make(template, base=base, **values)
     target = out if out is not None else default_target(fixture)
-    typer.echo(str(build_fixture(fixture, target, force=force, stl_tolerance=stl_tolerance)))
+    typer.echo(str(build_fixture(fixture, target, force=force, stl_tolerance=stl_tolerance,
+                                 fixture_tolerance=fixture_tolerance)))
 
 
 @app.command()

@@ -57,8 +57,9 @@ def register(
     sigma: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = 0.005,
     lever: Annotated[float | None, typer.Option(help="Sensor size, mm: plane and line sensors tilt by sigma/lever rad (default: the engine's SENSOR_LEVER_MM).")] = None,
     ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres).")] = None,
+    fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
 ):
-    """Pose of the fixture (fixture2meas) from touches, by the fixture's generated register.py."""
+    """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py."""
     from fixturecad.registration.touchfile import check_enough, format_result, read_touch_file
 
     if not Path(out_dir).is_dir():
@@ -66,13 +67,14 @@ def register(
     if not (sigma > 0 and sigma < float("inf")):
         raise InputError(f"--sigma must be a positive number of mm, got {sigma}")
     lever = _lever(lever)
+    _check_tolerance(fixture_tolerance)
     routine = load_routine(out_dir)
     try:
         points, contacts, radius, approaches = read_touch_file(touches, list(routine.FEATURES))
         radius = radius if ball_radius is None else ball_radius
         check_enough(routine.FEATURES, points, contacts, radius)
         result = routine.register(points, sigma_mm=sigma, ball_radius_mm=radius, contacts=contacts,
-                                  approaches=approaches, lever_mm=lever)
+                                  approaches=approaches, lever_mm=lever, fixture_tolerance_mm=fixture_tolerance)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     typer.echo(json.dumps(result, indent=2) if as_json else format_result(result))
@@ -88,10 +90,18 @@ def simulate(
     touch_plan: Annotated[str, typer.Option(help="Named touch plan of features.json.")] = "default",
     seed: Annotated[int, typer.Option(help="Seed of the random generator.")] = 0,
     nominal: Annotated[bool, typer.Option(help="Give the routine a nominal pose (1 deg, 1 mm off the truth).")] = False,
+    fixture_tolerance: Annotated[float | None, typer.Option(help="Print the fixture within a profile tolerance zone this wide, mm (default: as recorded in features.json; 0: an exact part).")] = None,
 ):
-    """Register synthetic noisy touches sampled on the STL; compare the errors with the Cramer-Rao bound."""
+    """Register synthetic noisy touches sampled on the STL; compare the errors with the Cramer-Rao bound.
+
+    With a fixture tolerance every trial touches a freshly printed part (its
+    features spread evenly over the zone) and the errors are split: from the
+    touch noise alone (a perfect part), from the part alone (no noise), in all.
+    """
     import numpy as np
 
+    from fixturecad.registration.deviations import tolerance_from_document
+    from fixturecad.registration.features import features_from_json
     from fixturecad.registration.sampling import TouchSampler, load_mesh
 
     if trials < 1:
@@ -99,6 +109,7 @@ def simulate(
     if not (noise >= 0 and noise < float("inf")):
         raise InputError(f"--noise must be a non-negative number of mm, got {noise}")
     lever = _lever(lever)
+    _check_tolerance(fixture_tolerance)
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
@@ -108,7 +119,8 @@ def simulate(
         raise InputError(f"no fixture.stl in {out_dir}: run fixturecad build first")
     routine = load_routine(out_dir)
     try:
-        sampler = TouchSampler(document, load_mesh(stl), touch_plan, plan is Positions.random)
+        tolerance = tolerance_from_document(features_from_json(document), document, fixture_tolerance)
+        sampler = TouchSampler(document, load_mesh(stl), touch_plan, plan is Positions.random, tolerance)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     rng = np.random.default_rng(seed)
@@ -118,10 +130,11 @@ def simulate(
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
         for _ in bar:
-            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever))
+            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance))
     summary = summarise(records, noise)
     summary.update({"trials": trials, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
-                    "nominal_pose": nominal})
+                    "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,
+                    "calibrated": tolerance is not None and "calibration" in document})
     (out_dir / SUMMARY_NAME).write_text(json.dumps(summary, indent=2))
     plot_errors(records, summary, out_dir / PLOT_NAME)
     typer.echo(format_summary(summary))
@@ -146,8 +159,22 @@ def _progress_stream():
     return sys.stderr if sys.stderr.isatty() else io.StringIO()
 
 
-def _trial(routine, sampler, rng, noise, sigma, nominal, lever):
-    """One registration of fresh synthetic touches: errors, status and the Cramer-Rao bound."""
+def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone):
+    """One registration of fresh synthetic touches: errors, status and the Cramer-Rao bound.
+
+    On a printed part (``sampler.tolerance``), also the errors of a perfect
+    part with the same noise and of the printed part without noise.
+    """
+    record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed=True)
+    if sampler.tolerance is not None:
+        alone = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed=False)
+        part = _registration(routine, sampler, rng, 0.0, sigma, nominal, lever, zone, printed=True)
+        record.update({f"noise_only_{key}": alone[key] for key in ("translation_error_mm", "rotation_error_deg")})
+        record.update({f"fixture_only_{key}": part[key] for key in ("translation_error_mm", "rotation_error_deg")})
+    return record
+
+
+def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed):
     import time
 
     import numpy as np
@@ -155,25 +182,42 @@ def _trial(routine, sampler, rng, noise, sigma, nominal, lever):
     from fixturecad.registration.engine import Problem, build_groups, cramer_rao_bound, sigmas
     from fixturecad.registration.pose import apply_twist, fixture2meas_from_rt, pose_errors
 
-    touches, contacts, truth = sampler.draw(rng, noise, lever_mm=lever)
+    tolerance = sampler.tolerance
+    deviations = None
+    if tolerance is not None:
+        # A perfect part is the model's own features (an as-built folder's are not the mesh's).
+        deviations = tolerance.random_deviations(rng) if printed else {
+            fid: np.zeros(len(m.names)) for fid, m in tolerance.modes.items()}
+    touches, contacts, truth = sampler.draw(rng, noise, lever_mm=lever, printed=deviations)
     initial = None
     if nominal:
         twist = np.concatenate([np.radians(1.0) * _unit(rng), 1.0 * _unit(rng)])
         initial = fixture2meas_from_rt(*apply_twist(truth[:3, :3], truth[:3, 3], twist))
     start = time.perf_counter()
-    result = routine.register(touches, initial_pose=initial, sigma_mm=sigma, contacts=contacts, lever_mm=lever)
+    result = routine.register(touches, initial_pose=initial, sigma_mm=sigma, contacts=contacts, lever_mm=lever,
+                              fixture_tolerance_mm=zone)
     elapsed = time.perf_counter() - start
     err_t, err_r = pose_errors(np.array(result["pose"]), truth)
-    problem = Problem(build_groups(sampler.features, touches, 0.0, contacts), sigma, lever)
-    bound_t, bound_r = sigmas(cramer_rao_bound(problem, truth, noise if noise > 0 else sigma))
+    # The bound of the noise actually drawn (the routine's sigma also allows for the STL's chords).
+    noise_model = noise if noise > 0 else sigma
+    groups = build_groups(sampler.features, touches, 0.0, contacts)
+    bound_t, bound_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever, tolerance), truth, noise_model))
+    noise_t, noise_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever), truth, noise_model))
     return {
         "status": result["status"],
         "translation_error_mm": err_t,
         "rotation_error_deg": float(np.degrees(err_r)),
         "crb_translation_mm": bound_t,
         "crb_rotation_deg": bound_r,
+        "noise_crb_translation_mm": noise_t,
+        "noise_crb_rotation_deg": noise_r,
         "time_s": elapsed,
     }
+
+
+def _check_tolerance(zone):
+    if zone is not None and not (zone >= 0 and zone < float("inf")):
+        raise InputError(f"--fixture-tolerance must be a non-negative number of mm, got {zone}")
 
 
 def _unit(rng):
@@ -216,12 +260,31 @@ def summarise(records, noise):
         "success_rate": float(success.mean()),
         "statuses": statuses,
         "median_time_ms": float(np.median([r["time_s"] for r in records]) * 1e3),
+        **_split(records),
     }
+
+
+def _split(records):
+    """RMS errors from the touch noise alone and from the printed part alone, when simulated."""
+    import numpy as np
+
+    out = {}
+    if "noise_only_translation_error_mm" in records[0]:
+        for key, unit in (("translation", "mm"), ("rotation", "deg")):
+            bound = np.array([r[f"noise_crb_{key}_{unit}"] for r in records], dtype=float)
+            out[f"noise_crb_{key}_{unit}"] = float(np.sqrt(np.nanmean(bound**2)))
+    for source in ("noise_only", "fixture_only"):
+        if f"{source}_translation_error_mm" in records[0]:
+            for key, unit in (("translation_error", "mm"), ("rotation_error", "deg")):
+                values = np.array([r[f"{source}_{key}_{unit}"] for r in records])
+                out[f"{source}_rms_{key}_{unit}"] = float(np.sqrt(np.mean(values**2)))
+    return out
 
 
 def format_summary(s) -> str:
     ratio = (
-        f"RMS error / Cramer-Rao bound: translation {s['ratio_translation_to_crb']:.3f}, rotation {s['ratio_rotation_to_crb']:.3f}"
+        f"RMS error / Cramer-Rao bound{' (touch noise and fixture)' if s['fixture_tolerance_mm'] is not None else ''}: "
+        f"translation {s['ratio_translation_to_crb']:.3f}, rotation {s['ratio_rotation_to_crb']:.3f}"
         if s["ratio_translation_to_crb"] is not None else "noise 0: no Cramer-Rao ratio"
     )
     return "\n".join([
@@ -235,6 +298,16 @@ def format_summary(s) -> str:
         ratio,
         f"success: {100 * s['success_rate']:.1f} %  statuses: "
         + ", ".join(f"{k} {v}" for k, v in sorted(s["statuses"].items())),
+        *([f"fixture tolerance: {s['fixture_tolerance_mm']:g} mm" if not s["calibrated"] else "as-built part (calibrated)",
+           "RMS error from the touch noise (a perfect part): "
+           f"{s['noise_only_rms_translation_error_mm'] * 1e3:.2f} um, {s['noise_only_rms_rotation_error_deg'] * 1e3:.3f} mdeg",
+           "RMS error from the printed part (no noise): "
+           f"{s['fixture_only_rms_translation_error_mm'] * 1e3:.2f} um, {s['fixture_only_rms_rotation_error_deg'] * 1e3:.3f} mdeg",
+           f"RMS error in all: {s['rms_translation_error_mm'] * 1e3:.2f} um, {s['rms_rotation_error_deg'] * 1e3:.3f} mdeg "
+           f"({s['rms_translation_error_mm'] / s['noise_crb_translation_mm']:.2f} x, "
+           f"{s['rms_rotation_error_deg'] / s['noise_crb_rotation_deg']:.2f} x the touch-noise bound "
+           f"{s['noise_crb_translation_mm'] * 1e3:.2f} um, {s['noise_crb_rotation_deg'] * 1e3:.3f} mdeg)"]
+          if "noise_only_rms_translation_error_mm" in s else []),
         f"median registration time: {s['median_time_ms']:.2f} ms",
     ])
 

@@ -108,7 +108,11 @@ class FixtureTolerance:
         return np.eye(self.size) - M @ np.linalg.solve(CM, C)
 
     def random_deviations(self, rng, zone_mm=None):
-        """A printed part's mode coordinates (dict id -> (k,)), each uniform over its range."""
+        """A printed part's mode coordinates (dict id -> (k,)): each uniform over its range, or, for
+        a calibrated part, drawn from the calibration's covariance."""
+        if self._given is not None and zone_mm is None:
+            return {fid: rng.multivariate_normal(np.zeros(s.stop - s.start), self.covariance[s, s])
+                    for fid, s in self.slices.items()}
         zone = self.zone_mm if zone_mm is None else zone_mm
         return {fid: random_coordinates(m, zone, rng) for fid, m in self.modes.items()}
 
@@ -190,3 +194,23 @@ def estimated_deviations(problem, tolerance, rotation, translation):
     Jd = deviation_rows(problem, tolerance, rotation, translation, J)
     C = problem.sigma**2 * np.eye(len(r)) + Jd @ tolerance.covariance @ Jd.T
     return tolerance.covariance @ Jd.T @ np.linalg.solve(C, -r)
+
+
+def tolerance_from_document(features, document, zone_mm=None):
+    """The FixtureTolerance of a features.json document, or None for an exact part.
+
+    ``zone_mm`` overrides the recorded tolerance zone; an as-built document's
+    calibration covariances apply unless it does.
+    """
+    from .datums import DatumScheme
+
+    if "datums" not in document:
+        return None
+    scheme = DatumScheme.from_json(document["datums"])
+    calibration = document.get("calibration")
+    if calibration is not None and zone_mm is None:
+        covariances = {fid: np.asarray(entry["covariance"], float) for fid, entry in calibration["features"].items()}
+        return FixtureTolerance(features, scheme, 0.0, covariances)
+    zone = float(document.get("tolerance", {}).get("zone_mm", 0.0)) if zone_mm is None else float(zone_mm)
+    # An as-built part is its own features even when taken as exact.
+    return FixtureTolerance(features, scheme, zone) if zone > 0 or calibration is not None else None

@@ -16,7 +16,8 @@ from .engine import DEFAULT_SIGMA_MM
 
 TEMPLATE_NAME = "register.py.tmpl"
 # Embedded modules in load order: each imports only the ones before it.
-EMBEDDED_MODULES = ("contacts", "pose", "features", "engine", "touchfile")
+EMBEDDED_MODULES = ("contacts", "pose", "features", "patches", "tolerance", "datums", "deviations", "engine",
+                    "touchfile")
 GENERATOR_VERSION = "0.1.0"
 
 

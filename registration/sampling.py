@@ -88,12 +88,15 @@ class TouchSampler:
     def __init__(self, document, mesh, plan="default", random_positions=False, tolerance=None):
         self.features = {entry["id"]: feature_from_json(entry) for entry in document["features"]}
         self.tolerance = tolerance  # the FixtureTolerance printed parts are drawn from
+        # The mesh is the drawing's: an as-built folder keeps the drawing's features to find it by.
+        drawing = (document.get("calibration") or {}).get("drawing", document["features"])
+        self.drawing = {entry["id"]: feature_from_json(entry) for entry in drawing}
         self.entries = plan_entries(document, plan)
         self.mesh = mesh
         self.random_positions = random_positions
         self.faces = {}
         for entry in self.entries:
-            feature = self.features[entry["feature"]]
+            feature = self.drawing[entry["feature"]]
             if "sensor" not in entry and feature.kind in ("plane", "sphere", "cylinder"):
                 faces = feature_faces(mesh, feature)
                 if not len(faces):
@@ -112,7 +115,7 @@ class TouchSampler:
         out = []
         for entry, snapped in zip(self.entries, self.snapped):
             points = snapped
-            feature = self.features[entry["feature"]]
+            feature = self.drawing[entry["feature"]]
             if self.random_positions and "sensor" not in entry:
                 if feature.id in self.faces:
                     points = sample_on_feature(self.mesh, self.faces[feature.id], feature, len(points), rng)

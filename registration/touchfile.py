@@ -157,6 +157,9 @@ def format_result(result):
         lines.append(f"{len(result['solutions'])} solutions pass the residual test")
     for motion in result["free_motions"]:
         lines.append(f"free: {motion}")
+    for flag in result.get("fixture_flagged", []):
+        lines.append(f"fixture: {flag['feature']} departs {flag['departure_mm']:.3f} mm from the drawing "
+                     f"({flag['mode']} {flag['deviation']:.4g}), beyond its tolerance")
     for flag in result["flagged"]:
         lines.append(f"flagged: touch {flag['touch']} on {flag['feature']} ({flag['residual_mm']:.4f} mm off)")
     if result["separating_touch"]:
@@ -178,18 +181,22 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.0
     parser.add_argument("--lever", type=float, default=default_lever_mm,
                         help="sensor size, mm: plane and line sensors tilt by sigma/lever rad")
     parser.add_argument("--ball-radius", type=float, default=None, help="ball tip radius, mm")
+    parser.add_argument("--fixture-tolerance", type=float, default=None,
+                        help="profile tolerance zone width of the printed features, mm (default: as recorded; 0: exact)")
     args = parser.parse_args(argv)
     try:
         if not np.isfinite(args.sigma) or args.sigma <= 0:
             raise ValueError(f"--sigma must be a positive number of mm, got {args.sigma}")
         if not np.isfinite(args.lever) or args.lever <= 0:
             raise ValueError(f"--lever must be a positive number of mm, got {args.lever}")
+        if args.fixture_tolerance is not None and not (0 <= args.fixture_tolerance < np.inf):
+            raise ValueError(f"--fixture-tolerance must be a non-negative number of mm, got {args.fixture_tolerance}")
         touches, contacts, radius, approaches = read_touch_file(args.touches, list(features))
         if args.ball_radius is not None:
             radius = args.ball_radius
         check_enough(features, touches, contacts, radius)
         result = register(touches, sigma_mm=args.sigma, ball_radius_mm=radius, contacts=contacts,
-                          approaches=approaches, lever_mm=args.lever)
+                          approaches=approaches, lever_mm=args.lever, fixture_tolerance_mm=args.fixture_tolerance)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2

@@ -90,7 +90,10 @@ def test_generated_routine_gives_the_library_pose(name, bare_site, tmp_path):
     result = json.loads(out.stdout)
     from fixturecad.registration.features import feature_from_json
 
-    library = engine.register_touches({k: feature_from_json(v) for k, v in features.items()}, touches)
+    from fixturecad.registration.deviations import tolerance_from_document
+
+    built = {k: feature_from_json(v) for k, v in features.items()}
+    library = engine.register_touches(built, touches, tolerance=tolerance_from_document(built, document))
     assert result["status"] == library["status"] == "unique"
     assert np.abs(np.array(result["pose"]) - np.array(library["pose"])).max() < 1e-9
     assert max(pose_errors(np.array(result["pose"]), truth)) < 0.05
@@ -137,7 +140,8 @@ def test_generated_routine_takes_the_sensor_noise_model(bare_site, tmp_path):
     touches, contacts = engine.perturb_touches(touches, contacts, np.random.default_rng(6), 0.002, 10.0)
     entries = [{"feature": k, "point": p.tolist()} for k, v in touches.items() for p in v] + contacts
     (tmp_path / "touches.json").write_text(json.dumps({"touches": entries}))
-    out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json", "--sigma", 0.002, "--lever", 10)
+    out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json", "--sigma", 0.002, "--lever", 10,
+                   "--fixture-tolerance", 0)
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout)
     from fixturecad.registration.features import feature_from_json
