@@ -2,7 +2,8 @@
 
 A CSV touch file has the header ``feature,x,y,z``: one touch per line, the
 feature id of features.json and the probe point (or ball centre) in mm in the
-measurement frame. Three more columns ``ax,ay,az`` may give the direction the
+measurement frame; lines starting with ``#`` and blank lines are skipped, and
+a UTF-8 byte order mark (Excel's "CSV UTF-8") is allowed. Three more columns ``ax,ay,az`` may give the direction the
 probe moved to make the touch; poses at which it would have touched a surface
 from inside are then rejected. A JSON touch file holds contacts of any type
 (a point touch may carry ``"approach": [ax, ay, az]``)::
@@ -33,10 +34,13 @@ MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
 def read_touch_csv(text, feature_ids):
     """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
     file line of every touch by feature id (lists)."""
-    if not text.strip():
+    text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8" starts with a byte order mark
+    # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
+    numbered = [(k, row) for k, row in enumerate(csv.reader(io.StringIO(text)), start=1)
+                if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
+    if not numbered:
         raise ValueError("the touch file is empty")
-    rows = list(csv.reader(io.StringIO(text)))
-    header = tuple(cell.strip().lower() for cell in rows[0])
+    header = tuple(cell.strip().lower() for cell in numbered[0][1])
     if header not in (CSV_COLUMNS, CSV_COLUMNS + APPROACH_COLUMNS):
         raise ValueError(
             f"touch CSV must have the columns {','.join(CSV_COLUMNS)} (and optionally "
@@ -44,9 +48,7 @@ def read_touch_csv(text, feature_ids):
         )
     width = len(header)
     touches, approaches, lines = {}, {}, {}
-    for line, row in enumerate(rows[1:], start=2):
-        if not row or all(not cell.strip() for cell in row):
-            continue
+    for line, row in numbered[1:]:
         if len(row) != width:
             raise ValueError(f"line {line}: expected {width} values ({','.join(header)}), got {len(row)}")
         _check_id(row[0].strip(), feature_ids, f"line {line}")
