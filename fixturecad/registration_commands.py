@@ -59,8 +59,11 @@ def register(
     ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres).")] = None,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
 ):
-    """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py."""
-    from fixturecad.registration.touchfile import check_enough, format_result, read_touch_file
+    """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py.
+
+    Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 2 bad input.
+    """
+    from fixturecad.registration.touchfile import EXIT_CODES, check_enough, format_result, read_touch_file
 
     if not Path(out_dir).is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
@@ -78,6 +81,7 @@ def register(
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     typer.echo(json.dumps(result, indent=2) if as_json else format_result(result))
+    raise typer.Exit(EXIT_CODES[result["status"]])
 
 
 @app.command()

@@ -1323,11 +1323,12 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         result["separating_touch"] = separating_touch(features, good)
     else:
         status = "inconsistent"
+        # Two kinds of explanation, both listed: a touch that is off, a feature printed beyond its tolerance.
         off = features_beyond_tolerance(problem, solutions) if problem.tolerance is not None else []
-        flagged = None if off else (robust_flag(problem, best) if problem.size > 7 else None)
-        if off:
-            result["fixture_flagged"] = [{"feature": fid, "mode": mode, "deviation": value, "departure_mm": mm}
-                                         for fid, mode, value, mm, _ in off]
+        result["fixture_flagged"] = [{"feature": fid, "mode": mode, "deviation": value, "departure_mm": mm}
+                                     for fid, mode, value, mm, _ in off]
+        flagged = robust_flag(problem, best) if problem.size > 7 else None
+        if flagged is None and off:
             best = off[0][-1]
             good = [item[-1] for item in off]
         elif flagged is not None:

@@ -29,6 +29,8 @@ import numpy as np
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
 MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
+# Exit code of a registration by its status; 2 is bad input.
+EXIT_CODES = {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent": 5}
 
 
 def read_touch_csv(text, feature_ids):
@@ -171,7 +173,11 @@ def format_result(result):
 
 
 def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.005, default_lever_mm=None):
-    """Command line: ``register.py touches.csv [--json]``; bad input is one line, exit 2."""
+    """Command line: ``register.py touches.csv [--json]``; bad input is one line, exit 2.
+
+    The exit code tells the status: 0 unique, 3 ambiguous, 4 underdetermined,
+    5 inconsistent (:data:`EXIT_CODES`).
+    """
     from .engine import SENSOR_LEVER_MM
 
     default_lever_mm = SENSOR_LEVER_MM if default_lever_mm is None else default_lever_mm
@@ -203,4 +209,4 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.0
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2
     print(json.dumps(result, indent=2) if args.json else format_result(result))
-    return 0
+    return EXIT_CODES[result["status"]]

@@ -203,3 +203,31 @@ def test_touch_csv_may_carry_the_probe_approach(tmp_path):
     assert approaches == {}
     with pytest.raises(ValueError, match="expected 7 values"):
         read_touch_csv("feature,x,y,z,ax,ay,az\ntop,1,2,3\n", ["top"])
+
+
+def test_exit_code_tells_the_status(bare_site, tmp_path):
+    """0 unique, 4 underdetermined, 5 inconsistent from register.py and `fixturecad register`."""
+    from cli import run
+
+    write_register_script(features_document("cube"), tmp_path / "register.py")
+    good = {"top": [[10, 10, 50], [40, 10, 50], [25, 40, 50]], "front": [[10, 0, 10], [40, 0, 10]],
+            "left": [[0, 25, 25], [0, 10, 40]]}
+    flat = {"top": [[5, 5, 50], [45, 5, 50], [25, 45, 50], [10, 30, 50], [40, 40, 50], [20, 20, 50]]}
+    off = {**good, "left": [[0, 25, 25], [2.0, 10, 40]]}
+    for name, case, code in (("good", good, 0), ("flat", flat, 4), ("off", off, 5)):
+        write_csv(tmp_path / f"{name}.csv", {k: np.array(v, float) for k, v in case.items()})
+        assert run_bare(bare_site, tmp_path, "register.py", f"{name}.csv").returncode == code, name
+    assert run("register", tmp_path, tmp_path / "off.csv").returncode == 5
+
+
+def test_ambiguous_exits_3(tmp_path):
+    from fixturecad.registration.touchfile import EXIT_CODES, main
+
+    (tmp_path / "t.csv").write_text("feature,x,y,z\n" + "top,1,2,3\n" * 6)
+    result = {"status": "ambiguous", "rms_residual_mm": 0.0, "sigma_translation_mm": None, "pose": np.eye(4).tolist(),
+              "solutions": [], "free_motions": [], "flagged": [], "separating_touch": None}
+    from fixturecad.registration.features import features_from_json
+
+    features = features_from_json(features_document("cube"))
+    assert main(features, lambda *a, **k: result, [str(tmp_path / "t.csv")], default_sigma_mm=0.005) == 3
+    assert EXIT_CODES == {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent": 5}
