@@ -148,7 +148,7 @@ def simulate(
 def _lever(lever):
     """The sensor lever (mm) of --lever, the engine's default when not given."""
     if lever is None:
-        from fixturecad.registration.engine import SENSOR_LEVER_MM
+        from fixturecad.registration.noise import SENSOR_LEVER_MM
 
         return SENSOR_LEVER_MM
     if not (lever > 0 and lever < float("inf")):
@@ -183,7 +183,9 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
 
     import numpy as np
 
-    from fixturecad.registration.engine import Problem, build_groups, cramer_rao_bound, sigmas
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.touches import build_groups
+    from fixturecad.registration.uncertainty import cramer_rao_bound, sigmas
     from fixturecad.registration.pose import apply_twist, fixture2meas_from_rt, pose_errors
 
     tolerance = sampler.tolerance

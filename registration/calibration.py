@@ -16,7 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .deviations import FixtureTolerance, deviation_rows
-from .engine import Problem, build_groups, solve
+from .problem import Problem
+from .solve import solve
+from .touches import build_groups
 from .pose import apply_twist
 from .tolerance import departure_mm, deviated
 

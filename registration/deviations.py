@@ -64,6 +64,15 @@ class FixtureTolerance:
                     self.modes[fid].sigma(FREED_ZONE_MM)[freed] ** 2
         self._given = covariances
 
+    @property
+    def point_sigma_mm(self):
+        """A standard deviation (mm) of a printed point off its nominal surface: a zone's spread evenly
+        over it, or, for a calibrated part, the largest of its features' position uncertainties."""
+        if self._given is None:
+            return self.zone_mm / (2.0 * np.sqrt(3.0))
+        mm = np.array([name.endswith("_mm") for m in self.modes.values() for name in m.names])
+        return float(np.sqrt(np.max(np.diag(self.covariance)[mm], initial=0.0)))
+
     def widened(self, fid, mode):
         """The same tolerance with one mode (index) of feature ``fid`` let free."""
         return FixtureTolerance(self.features, self.scheme, self.zone_mm, self._given, ((fid, mode),))

@@ -12,12 +12,14 @@ from importlib import resources
 from pathlib import Path
 from string import Template
 
-from .engine import DEFAULT_SIGMA_MM
+from .noise import DEFAULT_SIGMA_MM
 
 TEMPLATE_NAME = "register.py.tmpl"
 # Embedded modules in load order: each imports only the ones before it.
-EMBEDDED_MODULES = ("contacts", "pose", "features", "patches", "tolerance", "datums", "deviations", "engine",
-                    "touchfile")
+# The registration modules register.py carries, loaded on import from its own copy of their sources.
+EMBEDDED_MODULES = ("ambiguity", "contacts", "datums", "deviations", "engine", "features", "fits", "least_squares",
+                    "mobility", "motions", "noise", "patches", "pose", "problem", "solve", "starts", "tolerance",
+                    "touches", "touchfile", "uncertainty", "verdict")
 GENERATOR_VERSION = "0.1.0"
 
 
@@ -42,7 +44,6 @@ def register_source(features_document: dict) -> str:
         features_json=repr(features_json),
         sources="{\n" + "".join(f"    {name!r}: {source!r},\n" for name, source in sources.items()) + "}",
         digest=digest,
-        module_order=repr(EMBEDDED_MODULES),
     )
     ast.parse(text)
     return text

@@ -9,7 +9,8 @@ engine.
 
 import numpy as np
 
-from .engine import SENSOR_LEVER_MM, perturb_touches, plan_touches
+from .noise import SENSOR_LEVER_MM
+from .synthetic import perturb_touches, plan_touches
 from .features import feature_from_json
 from .pose import fixture2meas_from_rt, random_rotation
 

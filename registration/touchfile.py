@@ -140,7 +140,8 @@ def read_touch_file(path, feature_ids):
 
 def check_enough(features, touches, contacts, ball_radius_mm):
     """Refuse a touch set with fewer constraint rows than a pose needs."""
-    from .engine import Problem, build_groups
+    from .problem import Problem
+    from .touches import build_groups
 
     rows = Problem(build_groups(features, touches, ball_radius_mm, contacts)).size
     if rows < MIN_ROWS:
@@ -178,7 +179,7 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.0
     The exit code tells the status: 0 unique, 3 ambiguous, 4 underdetermined,
     5 inconsistent (:data:`EXIT_CODES`).
     """
-    from .engine import SENSOR_LEVER_MM
+    from .noise import SENSOR_LEVER_MM
 
     default_lever_mm = SENSOR_LEVER_MM if default_lever_mm is None else default_lever_mm
     parser = argparse.ArgumentParser(prog=prog, description="Pose of the fixture from touches.")

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 
 from cli import assert_bad_input, run
-from fixturecad.registration import engine
+from fixturecad.registration.engine import register_touches
+from fixturecad.registration.problem import Problem
+from fixturecad.registration.touches import build_groups
+from fixturecad.registration.uncertainty import cramer_rao_bound, sigmas
 from fixturecad.registration.pose import pose_errors
 
 templates = pytest.importorskip("fixturecad.templates")
@@ -44,13 +47,13 @@ def test_touches_on_the_mesh_give_the_pose_within_the_chord_tolerance(name, buil
     rng = np.random.default_rng(21)
     for _ in range(10):
         touches, contacts, truth = sampler.draw(rng, 0.0)
-        result = engine.register_touches(sampler.features, touches, sigma_mm=sigma, contacts=contacts)
+        result = register_touches(sampler.features, touches, sigma_mm=sigma, contacts=contacts)
         # Every touch within the chord tolerance of its feature at the recovered pose ...
         assert result["status"] == "unique", result["status"]
         assert result["rms_residual_mm"] <= chord
         # ... and the pose as close as that tolerance allows (3 sigma of its propagated error).
-        problem = engine.Problem(engine.build_groups(sampler.features, touches, 0.0, contacts), sigma)
-        bound_t, bound_r = engine.sigmas(engine.cramer_rao_bound(problem, truth, chord))
+        problem = Problem(build_groups(sampler.features, touches, 0.0, contacts), sigma)
+        bound_t, bound_r = sigmas(cramer_rao_bound(problem, truth, chord))
         dt, dr = pose_errors(np.array(result["pose"]), truth)
         assert dt <= 3.0 * bound_t + 1e-6
         assert np.degrees(dr) <= 3.0 * bound_r + 1e-6

@@ -6,7 +6,16 @@ import sys
 import numpy as np
 import pytest
 
-from fixturecad.registration import engine
+from fixturecad.registration.ambiguity import _patch_samples
+from fixturecad.registration.contacts import residuals_and_jacobian
+from fixturecad.registration.engine import register_touches
+from fixturecad.registration.mobility import jacobian_rank
+from fixturecad.registration.noise import SENSOR_LEVER_MM, is_point_sensor, row_whitening
+from fixturecad.registration.problem import Problem
+from fixturecad.registration.starts import plane_cylinder_starts
+from fixturecad.registration.synthetic import perturb_touches, plan_touches
+from fixturecad.registration.touches import TouchGroup, build_groups, point_touches
+from fixturecad.registration.uncertainty import cramer_rao_bound
 from fixturecad.registration.contacts import ContactType
 from fixturecad.registration.features import Plane, Sphere
 from fixturecad.registration.pose import (
@@ -83,11 +92,11 @@ def test_every_contact_stacks_six_minus_d_independent_rows(swap):
         R, t = truth[:3, :3], truth[:3, 3]
         # The instance sits in the measurement frame; its fixture side goes back to the fixture frame.
         fixture = instance.fixture.moved(R.T, -R.T @ t)
-        group = engine.TouchGroup(None, ctype, instance.sensor, fixture, np.array([instance.rho]), np.array([0]))
-        values, jacobian = engine.Problem([group]).evaluate(R, t)
+        group = TouchGroup(None, ctype, instance.sensor, fixture, np.array([instance.rho]), np.array([0]))
+        values, jacobian = Problem([group]).evaluate(R, t)
         assert np.abs(values).max() < 1e-8, ctype.name
         assert len(values) == 6 - dim, ctype.name
-        assert engine.jacobian_rank(jacobian, 50.0) == 6 - dim, ctype.name
+        assert jacobian_rank(jacobian, 50.0) == 6 - dim, ctype.name
 
 
 # ------------------------------------------------------------------ exact recovery
@@ -99,8 +108,8 @@ def test_noise_free_touches_on_the_analytic_surfaces_give_the_pose(name, plan):
     rng = np.random.default_rng(3)
     for _ in range(4):
         truth = _random_pose(rng)
-        touches, contacts = engine.plan_touches(entries, truth)
-        result = engine.register_touches(features, touches, contacts=contacts)
+        touches, contacts = plan_touches(entries, truth)
+        result = register_touches(features, touches, contacts=contacts)
         assert result["status"] in ("unique", "ambiguous"), result["status"]
         errors = _solution_errors(result, truth)
         assert min(max(e) for e in errors) < 1e-6
@@ -110,7 +119,7 @@ def test_noise_free_touches_on_the_analytic_surfaces_give_the_pose(name, plan):
         # From a nominal pose 5 degrees and 5 mm off, the same answer.
         twist = np.concatenate([np.radians(5.0) * np.array([0.6, 0.0, 0.8]), [3.0, 4.0, 0.0]])
         nominal = fixture2meas_from_rt(*apply_twist(truth[:3, :3], truth[:3, 3], twist))
-        result = engine.register_touches(features, touches, nominal, contacts=contacts)
+        result = register_touches(features, touches, nominal, contacts=contacts)
         dt, dr = pose_errors(np.array(result["pose"]), truth)
         assert dt < 1e-6 and dr < 1e-6
 
@@ -126,7 +135,7 @@ def test_ball_tip_touches_are_ball_centres():
         points = np.asarray(entry["points"], float)
         centres = points + radius * feature.normal_at(points)
         touches[feature.id] = centres @ truth[:3, :3].T + truth[:3, 3]
-    result = engine.register_touches(features, touches, ball_radius_mm=radius)
+    result = register_touches(features, touches, ball_radius_mm=radius)
     assert result["status"] == "unique"
     dt, dr = pose_errors(np.array(result["pose"]), truth)
     assert dt < 1e-6 and dr < 1e-6
@@ -151,18 +160,18 @@ def test_errors_match_the_cramer_rao_bound(name, plan):
     err_t, err_r, bound_t, bound_r = [], [], [], []
     for _ in range(trials):
         truth = _random_pose(rng)
-        touches, contacts = engine.plan_touches(entries, truth)
-        noisy, contacts = engine.perturb_touches(touches, contacts, rng, sigma)
+        touches, contacts = plan_touches(entries, truth)
+        noisy, contacts = perturb_touches(touches, contacts, rng, sigma)
         nominal = fixture2meas_from_rt(
             *apply_twist(truth[:3, :3], truth[:3, 3], rng.normal(scale=[0.01] * 3 + [0.5] * 3))
         )
-        result = engine.register_touches(features, noisy, nominal, sigma_mm=sigma, contacts=contacts)
+        result = register_touches(features, noisy, nominal, sigma_mm=sigma, contacts=contacts)
         assert result["status"] == "unique"
         dt, dr = pose_errors(np.array(result["pose"]), truth)
         err_t.append(dt)
         err_r.append(dr)
-        problem = engine.Problem(engine.build_groups(features, noisy, 0.0, contacts), sigma)
-        bound = engine.cramer_rao_bound(problem, truth, sigma)
+        problem = Problem(build_groups(features, noisy, 0.0, contacts), sigma)
+        bound = cramer_rao_bound(problem, truth, sigma)
         bound_t.append(np.trace(bound[3:, 3:]))
         bound_r.append(np.trace(bound[:3, :3]))
     ratio_t = np.sqrt(np.mean(np.square(err_t)) / np.mean(bound_t))
@@ -176,28 +185,28 @@ def test_point_sensors_keep_iid_row_noise_and_directed_sensors_tilt():
     a plane sensor's normal rows carry the tilt sigma / lever."""
     features, entries = _plan("quarter-sphere", "default")
     truth = _random_pose(np.random.default_rng(5))
-    touches, contacts = engine.plan_touches(entries, truth)
-    groups = engine.build_groups(features, touches, 0.0, contacts)
-    balls = engine.build_groups(features, touches, 1.5)
+    touches, contacts = plan_touches(entries, truth)
+    groups = build_groups(features, touches, 0.0, contacts)
+    balls = build_groups(features, touches, 1.5)
     for g in groups + balls:
-        _, J = engine.residuals_and_jacobian(g.ctype, g.sensor, g.fixture, truth[:3, :3], truth[:3, 3], g.rho)
-        W = engine.row_whitening(J, g.centre)
+        _, J = residuals_and_jacobian(g.ctype, g.sensor, g.fixture, truth[:3, :3], truth[:3, 3], g.rho)
+        W = row_whitening(J, g.centre)
         if g.ctype.sensor in ("P", "S"):
             # The engine skips the whitening of these sensors: it is the identity.
-            assert engine._point_sensor(g.sensor)
+            assert is_point_sensor(g.sensor)
             assert np.allclose(W, np.eye(W.shape[-1]), atol=1e-9), g.ctype.name
         elif g.ctype.sensor == "PL":
             # C / sigma^2 = (W^T W)^-1: two normal rows (unitless) of variance 1 / lever^2 per mm^2.
             C = np.linalg.inv(W[0].T @ W[0])
-            assert np.allclose(C[:2, :2], np.eye(2) / engine.SENSOR_LEVER_MM**2, rtol=1e-6, atol=1e-12)
+            assert np.allclose(C[:2, :2], np.eye(2) / SENSOR_LEVER_MM**2, rtol=1e-6, atol=1e-12)
 
 
 def test_covariance_at_the_truth_is_the_bound():
     features, entries = _plan("cube", "default")
     truth = _random_pose(np.random.default_rng(8))
-    touches, _ = engine.plan_touches(entries, truth)
-    result = engine.register_touches(features, touches, sigma_mm=0.005)
-    bound = engine.cramer_rao_bound(engine.Problem(engine.build_groups(features, touches)), truth, 0.005)
+    touches, _ = plan_touches(entries, truth)
+    result = register_touches(features, touches, sigma_mm=0.005)
+    bound = cramer_rao_bound(Problem(build_groups(features, touches)), truth, 0.005)
     assert np.allclose(np.array(result["covariance"]), bound, rtol=1e-6, atol=1e-14)
     assert result["sigma_translation_mm"] == pytest.approx(np.sqrt(np.trace(bound[3:, 3:])))
 
@@ -237,7 +246,7 @@ def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
     for _ in range(5):
         truth = _random_pose(rng)
         touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in plan.items()}
-        result = engine.register_touches(features, touches)
+        result = register_touches(features, touches)
         assert result["status"] == "ambiguous"
         errors = sorted(_solution_errors(result, truth))
         # The true pose and its mirror: the ball centre reflected through the touches' plane.
@@ -250,7 +259,7 @@ def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
         point = truth[:3, :3] @ np.array(extra["point_fixture_mm"]) + truth[:3, 3]
         more = {k: v.copy() for k, v in touches.items()}
         more[extra["feature"]] = np.vstack([more[extra["feature"]], point])
-        result = engine.register_touches(features, more)
+        result = register_touches(features, more)
         assert result["status"] == "unique"
         assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
 
@@ -261,7 +270,7 @@ def test_the_probe_approach_rules_out_the_mirror():
     truth = _random_pose(np.random.default_rng(1))
     touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in plan.items()}
     down = np.tile(truth[:3, :3] @ [0.0, 0.0, -1.0], (3, 1))
-    result = engine.register_touches(features, touches, approaches={"ball": down})
+    result = register_touches(features, touches, approaches={"ball": down})
     assert result["status"] == "unique"
     assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
 
@@ -274,7 +283,7 @@ def test_three_collinear_touches_on_a_plane_are_underdetermined():
 
     e1, _ = perpendicular_basis(top.normal)
     line = top.point + np.outer([-5.0, 0.0, 5.0], e1)
-    result = engine.register_touches(features, {"top": line @ truth[:3, :3].T + truth[:3, 3]})
+    result = register_touches(features, {"top": line @ truth[:3, :3].T + truth[:3, 3]})
     assert result["status"] == "underdetermined"
     assert result["covariance"] is None
     motions = result["free_motions"]
@@ -287,10 +296,10 @@ def test_three_collinear_touches_on_a_plane_are_underdetermined():
 def test_collinear_touches_in_a_full_plan_name_the_missing_rotation():
     features, entries = _plan("cube", "default")
     truth = _random_pose(np.random.default_rng(6))
-    touches, _ = engine.plan_touches(entries, truth)
+    touches, _ = plan_touches(entries, truth)
     top = touches["top"]
     top[2] = 0.5 * (top[0] + top[1])  # the third touch on the line of the first two
-    result = engine.register_touches(features, touches)
+    result = register_touches(features, touches)
     assert result["status"] == "underdetermined"
     assert result["rank"] == 5
     # The rotation that tilts top about the touch line, with front and left still touching.
@@ -304,14 +313,14 @@ def test_a_touch_labelled_with_the_wrong_feature_is_flagged():
     truth = _random_pose(rng)
     local = {}
     for fid, feature in features.items():
-        samples = engine._patch_samples(feature, count=50, seed=1)
+        samples = _patch_samples(feature, count=50, seed=1)
         local[fid] = samples[:4]
     touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in local.items()}
     touches = {k: v + rng.normal(scale=0.002, size=v.shape) for k, v in touches.items()}
     # Move the last touch on "front" to "left": labelled front, it was taken on left.
     wrong = local["left"][0] + np.array([0.0, 0.0, 0.0])
     touches["front"][3] = truth[:3, :3] @ wrong + truth[:3, 3]
-    result = engine.register_touches(features, touches)
+    result = register_touches(features, touches)
     assert result["status"] == "inconsistent"
     assert [(f["feature"], f["touch"]) for f in result["flagged"]] == [("front", 7)]
     dt, dr = pose_errors(np.array(result["pose"]), truth)
@@ -321,11 +330,11 @@ def test_a_touch_labelled_with_the_wrong_feature_is_flagged():
 def test_no_touches_is_refused():
     features, _ = _plan("cube", "default")
     with pytest.raises(ValueError, match="no touches"):
-        engine.register_touches(features, {})
+        register_touches(features, {})
     with pytest.raises(ValueError, match="unknown feature 'nope'"):
-        engine.register_touches(features, {"nope": np.zeros((3, 3))})
+        register_touches(features, {"nope": np.zeros((3, 3))})
     with pytest.raises(ValueError, match="finite"):
-        engine.register_touches(features, {"top": np.full((3, 3), np.nan)})
+        register_touches(features, {"top": np.full((3, 3), np.nan)})
 
 
 def test_the_engine_imports_neither_cadquery_nor_trimesh():
@@ -339,9 +348,9 @@ def test_the_engine_imports_neither_cadquery_nor_trimesh():
 
 def test_contact_type_of_point_touches():
     features, _ = _plan("inclined-plane-cylinder", "default")
-    group = engine.point_touches(features["cylinder"], np.full((2, 3), 100.0), np.arange(2))
+    group = point_touches(features["cylinder"], np.full((2, 3), 100.0), np.arange(2))
     assert group.ctype == ContactType.parse("P/F-C/M")
-    assert engine.Problem([group]).size == 2
+    assert Problem([group]).size == 2
 
 
 def test_cylinder_touches_at_two_angles_try_both_circle_centres():
@@ -363,7 +372,7 @@ def test_cylinder_touches_at_two_angles_try_both_circle_centres():
     }
     touches = {k: np.array(v) @ truth[:3, :3].T + truth[:3, 3] for k, v in local.items()}
     sigma = np.hypot(0.005, 0.01 / np.sqrt(3.0))
-    result = engine.register_touches(features, touches, sigma_mm=sigma)
+    result = register_touches(features, touches, sigma_mm=sigma)
     assert result["status"] == "unique"
     dt, dr = pose_errors(np.array(result["pose"]), truth)
     assert dt < 0.05 and dr < 1e-3
@@ -387,7 +396,7 @@ def test_plane_touches_nearly_on_a_line_report_both_poses():
                      [19.9579, -1.2913, 3.9665], [7.0313, 18.7241, -27.4485]],
     }
     touches = {k: np.array(v) @ truth[:3, :3].T + truth[:3, 3] for k, v in local.items()}
-    result = engine.register_touches(features, touches, sigma_mm=np.hypot(0.005, 0.01 / np.sqrt(3.0)))
+    result = register_touches(features, touches, sigma_mm=np.hypot(0.005, 0.01 / np.sqrt(3.0)))
     assert result["status"] == "ambiguous"
     errors = _solution_errors(result, truth)
     assert len(errors) == 2
@@ -401,9 +410,9 @@ def test_the_paper_plane_and_cylinder_steps_start_next_to_the_pose():
     rng = np.random.default_rng(10)
     for _ in range(5):
         truth = _random_pose(rng)
-        touches, _ = engine.plan_touches(entries, truth)
-        problem = engine.Problem(engine.build_groups(features, touches))
-        starts = engine.plane_cylinder_starts(problem)
+        touches, _ = plan_touches(entries, truth)
+        problem = Problem(build_groups(features, touches))
+        starts = plane_cylinder_starts(problem)
         errors = [pose_errors(fixture2meas_from_rt(R, t), truth) for R, t in starts]
         best = min(errors, key=lambda e: e[1])
         assert best[0] < 0.1 and best[1] < np.radians(0.2)
@@ -423,10 +432,10 @@ def test_the_paper_plane_and_cylinder_steps_start_next_to_the_pose():
 def test_free_motions_are_named_after_the_features(name, plan, left_out, motions):
     features, entries = _plan(name, plan)
     truth = _random_pose(np.random.default_rng(13))
-    touches, _ = engine.plan_touches(entries, truth)
+    touches, _ = plan_touches(entries, truth)
     for feature_id in left_out:
         touches.pop(feature_id)
-    result = engine.register_touches(features, touches)
+    result = register_touches(features, touches)
     assert result["status"] == "underdetermined"
     assert result["free_motions"] == motions
 
@@ -435,7 +444,7 @@ def test_a_ball_tip_contact_mixes_with_point_touches():
     """S/M-PL/M and S/M-S/M touches from a touch file: the offset defaults to the radii."""
     features, entries = _plan("quarter-sphere", "point-probe")
     truth = _random_pose(np.random.default_rng(14))
-    touches, _ = engine.plan_touches(entries, truth)
+    touches, _ = plan_touches(entries, truth)
     ball = 1.5
     contacts = []
     for feature_id in ("flat_b", "sphere"):
@@ -446,6 +455,6 @@ def test_a_ball_tip_contact_mixes_with_point_touches():
                          "sensor": {"kind": "sphere", "center": (truth[:3, :3] @ centre + truth[:3, 3]).tolist(),
                                     "radius": ball}})
         touches[feature_id] = touches[feature_id][1:]
-    result = engine.register_touches(features, touches, contacts=contacts)
+    result = register_touches(features, touches, contacts=contacts)
     assert result["status"] == "unique"
     assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fixturecad.registration import engine
+from fixturecad.registration.engine import register_touches
+from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.generate import register_source, write_register_script
 from fixturecad.registration.pose import fixture2meas_from_rt, pose_errors, random_rotation
 
@@ -30,7 +31,7 @@ def generated_case(tmp_path, name, seed, entries=None):
     write_register_script(document, tmp_path / "register.py")
     rng = np.random.default_rng(seed)
     truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
-    touches, contacts = engine.plan_touches(entries or document["touch_plan"], truth)
+    touches, contacts = plan_touches(entries or document["touch_plan"], truth)
     return document, truth, touches, contacts
 
 
@@ -82,7 +83,7 @@ def test_generated_routine_gives_the_library_pose(name, bare_site, tmp_path):
     entries = point_plans[0] if point_plans else entries
     rng = np.random.default_rng(12)
     truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
-    touches, _ = engine.plan_touches(entries, truth)
+    touches, _ = plan_touches(entries, truth)
     touches = {k: v + rng.normal(scale=0.003, size=v.shape) for k, v in touches.items()}
     write_csv(tmp_path / "touches.csv", touches)
     out = run_bare(bare_site, tmp_path, "register.py", "touches.csv", "--json")
@@ -93,7 +94,7 @@ def test_generated_routine_gives_the_library_pose(name, bare_site, tmp_path):
     from fixturecad.registration.deviations import tolerance_from_document
 
     built = {k: feature_from_json(v) for k, v in features.items()}
-    library = engine.register_touches(built, touches, tolerance=tolerance_from_document(built, document))
+    library = register_touches(built, touches, tolerance=tolerance_from_document(built, document))
     assert result["status"] == library["status"] == "unique"
     assert np.abs(np.array(result["pose"]) - np.array(library["pose"])).max() < 1e-9
     assert max(pose_errors(np.array(result["pose"]), truth)) < 0.05
@@ -137,7 +138,7 @@ def test_generated_routine_reads_plane_and_line_sensors_from_json(bare_site, tmp
 def test_generated_routine_takes_the_sensor_noise_model(bare_site, tmp_path):
     """--sigma and --lever of register.py give the library's pose and covariance."""
     document, truth, touches, contacts = generated_case(tmp_path, "quarter-sphere", 6)
-    touches, contacts = engine.perturb_touches(touches, contacts, np.random.default_rng(6), 0.002, 10.0)
+    touches, contacts = perturb_touches(touches, contacts, np.random.default_rng(6), 0.002, 10.0)
     entries = [{"feature": k, "point": p.tolist()} for k, v in touches.items() for p in v] + contacts
     (tmp_path / "touches.json").write_text(json.dumps({"touches": entries}))
     out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json", "--sigma", 0.002, "--lever", 10,
@@ -147,7 +148,7 @@ def test_generated_routine_takes_the_sensor_noise_model(bare_site, tmp_path):
     from fixturecad.registration.features import feature_from_json
 
     features = {f["id"]: feature_from_json(f) for f in document["features"]}
-    library = engine.register_touches(features, touches, sigma_mm=0.002, contacts=contacts, lever_mm=10.0)
+    library = register_touches(features, touches, sigma_mm=0.002, contacts=contacts, lever_mm=10.0)
     assert result["status"] == library["status"] == "unique"
     assert np.abs(np.array(result["pose"]) - np.array(library["pose"])).max() < 1e-9
     assert np.allclose(result["covariance"], library["covariance"], rtol=1e-6, atol=1e-18)

@@ -5,7 +5,9 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from fixturecad.registration.engine import Problem, build_groups, plan_touches
+from fixturecad.registration.problem import Problem
+from fixturecad.registration.synthetic import plan_touches
+from fixturecad.registration.touches import build_groups
 from fixturecad.templates import TEMPLATES, make
 from fixturecad.theory.enumeration import class_of_contacts, enumerate_classes
 

@@ -1,0 +1,139 @@
+"""When the touches do not settle the pose: what explains an inconsistency, what separates candidates.
+
+This module imports numpy and scipy only and nothing of fixturecad: it is
+inlined into the generated standalone ``register.py``.
+"""
+
+import numpy as np
+
+from .least_squares import levenberg_marquardt
+from .problem import Problem
+from .solve import solve
+from .verdict import Solution, judged
+
+def robust_flag(problem, solution):
+    """A touch whose removal makes the touches consistent, found by a Cauchy-weighted refit.
+
+    The robust (Cauchy) fit ranks the touches by residual; the worst are left
+    out in turn. Returns (touch index, refit Solution, its residual mm) or None.
+    """
+    sigma = problem.sigma
+    R, t = solution.rotation, solution.translation
+    scale = 3.0 * sigma
+    r = solution.residuals
+    for _ in range(5):
+        weights = 1.0 / (1.0 + (r / scale) ** 2)
+        R, t, r, _ = levenberg_marquardt(problem, R, t, weights=weights, max_iterations=20)
+    per_touch = {}
+    for touch, value in zip(problem.row_touch, r):
+        per_touch[int(touch)] = per_touch.get(int(touch), 0.0) + float(value) ** 2
+    # Leave out the worst touches in turn and solve again from scratch.
+    for touch in sorted(per_touch, key=lambda k: -per_touch[k]):
+        reduced = problem.without(touch)
+        if reduced.size <= 6:
+            continue
+        good = [s for s in solve(reduced) if s.passes and s.admissible and s.rank == 6]
+        if good:
+            return touch, good[0], float(np.sqrt(per_touch[touch]))
+    return None
+
+
+
+def features_beyond_tolerance(problem, solutions, starts=4):
+    """Feature deviations beyond the tolerance that explain touches failing the residual test.
+
+    Each mode of each touched feature is let free in turn
+    (:meth:`FixtureTolerance.widened`) and the pose refitted from each of the
+    best ``starts`` solutions; a mode is named when a refit passes. Returns [(feature id, mode name, its estimated
+    coordinate mm or rad, the feature's departure from the drawing mm, refit
+    Solution)] of the modes whose departure leaves the zone, the smallest first.
+    """
+    from .deviations import estimated_deviations
+    from .tolerance import deviated, departure_mm
+
+    found = []
+    length = problem.scale()
+    for fid in dict.fromkeys(g.feature.id for g in problem.groups):
+        modes = problem.tolerance.modes[fid]
+        for k, name in enumerate(modes.names):
+            tolerance = problem.tolerance.widened(fid, k)
+            freed = Problem(problem.groups, problem.sigma, problem.lever, tolerance)
+            for solution in solutions[:starts]:
+                R, t, r, J = levenberg_marquardt(freed, solution.rotation, solution.translation)
+                refit = judged(freed, Solution(R, t, r, J), length)
+                if refit.passes and refit.admissible and refit.rank == 6:
+                    break
+            else:
+                continue
+            delta = estimated_deviations(freed, tolerance, R, t)[tolerance.slices[fid]]
+            departure = departure_mm(tolerance.features[fid], deviated(modes, delta))
+            if departure > problem.tolerance.zone_mm / 2:
+                found.append((fid, name, float(delta[k]), departure, refit))
+    return sorted(found, key=lambda item: item[3])
+
+
+
+def _patch_samples(feature, count=400, seed=0):
+    """Points (fixture frame) on a feature's finite patch, for choosing an extra touch."""
+    rng = np.random.default_rng(seed)
+    kind = feature.kind
+    if kind == "point":
+        return feature.point[None]
+    size = 50.0
+    if kind == "plane":
+        from .contacts import perpendicular_basis
+
+        e1, e2 = perpendicular_basis(feature.normal)
+        uv = rng.uniform(-size, size, size=(count, 2))
+        pts = feature.point + uv[:, :1] * e1 + uv[:, 1:] * e2
+    elif kind == "sphere":
+        u = rng.normal(size=(count, 3))
+        pts = feature.center + feature.radius * u / np.linalg.norm(u, axis=1, keepdims=True)
+    elif kind == "cylinder":
+        from .contacts import perpendicular_basis
+
+        e1, e2 = perpendicular_basis(feature.axis)
+        lo, hi = feature.extent.interval or (-size, size)
+        s = rng.uniform(lo, hi, count)
+        a = rng.uniform(0, 2 * np.pi, count)
+        pts = feature.point + s[:, None] * feature.axis + feature.radius * (
+            np.cos(a)[:, None] * e1 + np.sin(a)[:, None] * e2
+        )
+    else:
+        lo, hi = feature.extent.interval or (-size, size)
+        pts = feature.point + np.linspace(lo, hi, count)[:, None] * feature.direction
+    inside = feature.contains(pts, 1e-6)
+    return pts[inside] if inside.any() else pts[:0]
+
+
+
+def separating_touch(features, solutions):
+    """The point touch that best tells the best candidate pose from all the others.
+
+    Over points on every feature's patch, the touch the best candidate
+    predicts (``point_meas_mm``) is scored by how far it would lie off that
+    feature under each other candidate; the smallest of these distances is
+    maximised (``separation_mm``).
+    """
+    if len(solutions) < 2:
+        return None
+    a, others = solutions[0], solutions[1:]
+    best = None
+    for feature in features.values():
+        pts = _patch_samples(feature)
+        if not len(pts):
+            continue
+        meas = pts @ a.rotation.T + a.translation
+        gap = np.full(len(pts), np.inf)
+        for b in others:
+            local_b = (meas - b.translation) @ b.rotation
+            gap = np.minimum(gap, np.abs(feature.signed_distance(local_b)))
+        k = int(np.argmax(gap))
+        if best is None or gap[k] > best["separation_mm"]:
+            best = {
+                "feature": feature.id,
+                "point_fixture_mm": pts[k].tolist(),
+                "point_meas_mm": meas[k].tolist(),
+                "separation_mm": float(gap[k]),
+            }
+    return best

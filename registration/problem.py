@@ -1,0 +1,216 @@
+"""The stacked problem: whitened residuals and their twist Jacobian at any pose.
+
+This module imports numpy and scipy only and nothing of fixturecad: it is
+inlined into the generated standalone ``register.py``.
+"""
+
+import numpy as np
+
+from .contacts import DIRECTION_KEYS, POINT_KEYS, residuals_and_jacobian
+from .noise import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM, is_point_sensor, placement_centre, whitened
+from .touches import TouchGroup
+
+RADIUS_DERIVATIVE_REACH = 1e-2  # rad and mm: how far the pose may move before a radius derivative is redone
+
+class Problem:
+    """A stacked touch plan: whitened residuals (m,) and twist Jacobian (m, 6) at any pose.
+
+    Rows are whitened touch by touch under the sensor noise model
+    (:func:`row_whitening`, at the pose evaluated) and stay in mm: their
+    covariance is ``sigma_mm^2 I``.
+    """
+
+    def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM, tolerance=None):
+        if not (lever_mm > 0 and np.isfinite(lever_mm)):
+            raise ValueError(f"the sensor lever must be a positive number of mm, got {lever_mm}")
+        self.groups = [g if g.centre is not None else _with_centre(g) for g in groups if g.count]
+        self.sigma = float(sigma_mm)
+        self.lever = float(lever_mm)
+        self._scale = None
+        # Rows are computed per contact type: groups of one type on different
+        # features are stacked into one call of the contact model.
+        self.batches = _merge(self.groups)
+        self.tolerance = tolerance if tolerance is not None and tolerance.size else None
+        self._row_feature = None
+        self._radius_derivative = None
+
+    def sensor_rows(self, rotation, translation, grow=0.0):
+        """Rows and Jacobian whitened for the sensor noise only (the fixture's deviations left in)."""
+        values, jacobians = [], []
+        for g in self.batches:
+            fixture, rho = g.fixture, g.rho
+            if grow and "r" in fixture.geometry:
+                # A grown sphere or cylinder: its radius, and the offset of the touches that include it.
+                fixture = type(fixture)(fixture.kind, fixture.fixed, {**fixture.geometry, "r": fixture["r"] + grow})
+                rho = rho + grow
+            v, J = residuals_and_jacobian(g.ctype, g.sensor, fixture, rotation, translation, rho)
+            g.rows = v.shape[1]
+            if not is_point_sensor(g.sensor):
+                v, J = whitened(v, J, g.centre, self.lever)
+            values.append(v.reshape(-1))
+            jacobians.append(J.reshape(-1, 6))
+        return np.concatenate(values), np.concatenate(jacobians)
+
+    def evaluate(self, rotation, translation):
+        r, J = self.sensor_rows(rotation, translation)
+        if self.tolerance is None:
+            return r, J
+        from .deviations import deviation_rows
+
+        Jd = deviation_rows(self, self.tolerance, rotation, translation, J)
+        C = np.eye(len(r)) + Jd @ self.tolerance.covariance @ Jd.T / self.sigma**2
+        whitened = np.linalg.solve(np.linalg.cholesky(C), np.column_stack([r, J]))
+        return whitened[:, 0], whitened[:, 1:]
+
+    def as_noise(self):
+        """The same touches with the part's deviations taken as independent noise on every row."""
+        sigma = float(np.hypot(self.sigma, self.tolerance.point_sigma_mm))
+        return Problem(self.groups, sigma, self.lever)
+
+    def radius_derivative(self, rotation, translation, step=1e-4):
+        """How each (whitened) row changes as its feature's radius grows, shape (m,) per mm.
+
+        Kept while the pose stays within ``RADIUS_DERIVATIVE_REACH`` (rad, mm):
+        it hardly changes with the pose, and it costs two evaluations.
+        """
+        if self._radius_derivative is not None:
+            R0, t0, value = self._radius_derivative
+            if np.abs(rotation - R0).max() < RADIUS_DERIVATIVE_REACH and np.abs(translation - t0).max() < RADIUS_DERIVATIVE_REACH:
+                return value
+        grown = self.sensor_rows(rotation, translation, step)[0]
+        shrunk = self.sensor_rows(rotation, translation, -step)[0]
+        value = (grown - shrunk) / (2 * step)
+        self._radius_derivative = (rotation, translation, value)
+        return value
+
+    @property
+    def row_feature(self):
+        """The feature id of every row of ``evaluate``, shape (m,)."""
+        if self._row_feature is None:
+            feature_of = {int(i): g.feature.id for g in self.groups for i in g.index}
+            self._row_feature = np.array([feature_of[int(i)] for i in self.row_touch])
+        return self._row_feature
+
+    def _count_rows(self):
+        if any(not g.rows for g in self.batches):
+            self.sensor_rows(np.eye(3), np.zeros(3))
+
+    @property
+    def row_touch(self):
+        """The touch index of every row of ``evaluate``, shape (m,)."""
+        self._count_rows()
+        if not self.batches:
+            return np.zeros(0, int)
+        return np.concatenate([np.repeat(g.index, g.rows) for g in self.batches])
+
+    @property
+    def size(self):
+        """Number of rows m."""
+        self._count_rows()
+        return int(sum(g.rows * g.count for g in self.batches))
+
+    def evaluate_batch(self, rotations, translations):
+        """Residuals (K, m) and fixture-frame Jacobians (K, m, 6) at K poses in one call.
+
+        Each pose's sensors are mapped into the fixture frame (``R^T (x - t)``),
+        all K copies stacked into one call of the contact model at the identity.
+        The translation columns give the fixture-frame translation ``v`` that
+        moves the pose to ``t + R v``.
+        """
+        K = len(rotations)
+        values, jacobians = [], []
+        for g in self.groups:
+            geometry = {}
+            for key, value in g.sensor.geometry.items():
+                value = np.broadcast_to(value, (g.count,) + np.shape(value)[1:] if np.ndim(value) else (g.count,))
+                if key in POINT_KEYS:
+                    moved = np.einsum("kji,knj->kni", rotations, value[None] - translations[:, None])
+                elif key in DIRECTION_KEYS:
+                    moved = np.einsum("kji,knj->kni", rotations, np.broadcast_to(value, (K,) + value.shape))
+                else:
+                    moved = np.broadcast_to(value, (K,) + value.shape)
+                geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
+            sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
+            v, J = residuals_and_jacobian(g.ctype, sensor, g.fixture, np.eye(3), np.zeros(3), np.tile(g.rho, K))
+            if not is_point_sensor(g.sensor):
+                centres = np.einsum("kji,knj->kni", rotations, g.centre[None] - translations[:, None])
+                v, J = whitened(v, J, centres.reshape(-1, 3), self.lever)
+            values.append(v.reshape(K, -1))
+            jacobians.append(J.reshape(K, -1, 6))
+        return np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1)
+
+    def without(self, touch):
+        """The plan with one touch (by caller index) left out."""
+        groups = []
+        for g in self.groups:
+            keep = g.index != touch
+            if keep.all():
+                groups.append(g)
+            elif keep.any():
+                groups.append(_subset(g, keep))
+        return Problem(groups, self.sigma, self.lever, self.tolerance)
+
+    def scale(self):
+        """A length (mm) that balances rotation and translation columns of the Jacobian."""
+        if self._scale is None:
+            pts = [g.points for g in self.groups if g.points is not None]
+            self._scale = 1.0
+            if pts:
+                pts = np.concatenate(pts)
+                self._scale = max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
+        return self._scale
+
+
+
+def _with_centre(group):
+    """The group with its sensor placement centres filled in from the sensor's geometry."""
+    centre = placement_centre(group.sensor.kind, group.sensor.geometry)
+    group.centre = np.broadcast_to(np.asarray(centre, dtype=np.float64), (group.count, 3)).copy()
+    return group
+
+
+
+def _merge(groups):
+    """Groups of one contact type stacked into one, fixture geometry repeated per touch."""
+    by_type = {}
+    for g in groups:
+        key = (g.ctype, tuple(sorted(g.sensor.geometry)), tuple(sorted(g.fixture.geometry)))
+        by_type.setdefault(key, []).append(g)
+    batches = []
+    for members in by_type.values():
+        if len(members) == 1:
+            batches.append(members[0])
+            continue
+        first = members[0]
+        sensor = {key: np.concatenate([np.asarray(m.sensor.geometry[key]) for m in members])
+                  for key in first.sensor.geometry}
+        fixture = {}
+        for key in first.fixture.geometry:
+            parts = []
+            for m in members:
+                value = np.asarray(m.fixture.geometry[key])
+                parts.append(np.broadcast_to(value, (m.count,) + value.shape))
+            fixture[key] = np.concatenate(parts)
+        batches.append(TouchGroup(
+            None, first.ctype, type(first.sensor)(first.sensor.kind, first.sensor.fixed, sensor),
+            type(first.fixture)(first.fixture.kind, first.fixture.fixed, fixture),
+            np.concatenate([m.rho for m in members]), np.concatenate([m.index for m in members]),
+            centre=np.concatenate([np.broadcast_to(m.centre, (m.count, 3)) for m in members]),
+        ))
+    return batches
+
+
+
+def _subset(group, keep):
+    def cut(side):
+        geometry = {}
+        for key, value in side.geometry.items():
+            value = np.asarray(value)
+            geometry[key] = value[keep] if value.ndim >= 1 and value.shape[0] == len(keep) else value
+        return type(side)(side.kind, side.fixed, geometry)
+
+    sensor = cut(group.sensor)
+    rho = group.rho[keep]
+    points = None if group.points is None else group.points[keep]
+    return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows,
+                      centre=group.centre[keep])

@@ -1,0 +1,182 @@
+"""Touch groups: touches of one contact type on one feature, from points, sensors and touch files.
+
+This module imports numpy only and nothing of fixturecad: it is inlined into
+the generated standalone ``register.py``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .contacts import ContactType, make_side
+from .noise import placement_centre
+
+@dataclass
+class TouchGroup:
+    """Touches of one contact type on one feature.
+
+    ``points`` (n, 3) mm in the measurement frame are the probe points (point
+    touches) or ball centres (ball-tip touches); None for other sensors.
+    ``approach`` (n, 3), optional: the direction the probe moved to make each
+    touch (measurement frame; NaN rows unknown).
+    ``index`` (n,) numbers the touches in the caller's order.
+    ``centre`` (n, 3) mm, measurement frame: the point the sensor's placement
+    error turns about (see :func:`placement_centre`); None: from the sensor.
+    """
+
+    feature: object
+    ctype: ContactType
+    sensor: object
+    fixture: object
+    rho: np.ndarray
+    index: np.ndarray
+    points: np.ndarray | None = None
+    rows: int = 0
+    approach: np.ndarray | None = None
+    centre: np.ndarray | None = None
+
+    @property
+    def count(self) -> int:
+        return len(self.index)
+
+
+
+def fixture_side(feature, fixed: bool, **extra):
+    """The contact-model side of a feature in the fixture frame."""
+    kind = feature.kind
+    if kind == "plane":
+        return make_side("PL", fixed, q=feature.point, n=feature.normal, **extra)
+    if kind == "sphere":
+        return make_side("S", fixed, c=feature.center, r=feature.radius, **extra)
+    if kind == "cylinder":
+        return make_side("C", fixed, p=feature.point, d=feature.axis, r=feature.radius, **extra)
+    if kind == "line":
+        return make_side("L", fixed, p=feature.point, d=feature.direction, **extra)
+    return make_side("P", True, c=feature.point, o=feature.point, **extra)
+
+
+
+def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
+    """Point-probe touches (ball radius 0) or ball-tip centres on a feature."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = len(points)
+    fixture_element = feature.element
+    fixture_fixed = feature.kind == "point"
+    if ball_radius_mm > 0.0:
+        ctype = ContactType("S", False, fixture_element, fixture_fixed)
+        sensor = make_side("S", False, c=points, r=np.full(n, ball_radius_mm))
+        offset = {"plane": ball_radius_mm, "line": ball_radius_mm, "point": 0.0}
+        rho = offset.get(feature.kind, getattr(feature, "radius", 0.0) + ball_radius_mm)
+    else:
+        ctype = ContactType("P", True, fixture_element, fixture_fixed)
+        sensor = make_side("P", True, c=points, o=points)
+        rho = 0.0
+    return TouchGroup(
+        feature, ctype, sensor, fixture_side(feature, fixture_fixed), np.full(n, float(rho)),
+        np.asarray(index), points, centre=points,
+    )
+
+
+
+def sensor_geometry(ctype, sensor, contact_point=None):
+    """Contact-model keys of a sensor element, measurement frame.
+
+    ``sensor`` is either the touch-plan form ``{"kind": "plane", "point",
+    "normal"}`` / ``{"kind": "line", "point", "direction"}`` /
+    ``{"kind": "sphere" | "cylinder", ..., "radius"}``, or the contact model's
+    keys (``q``, ``n``, ``p``, ``d``, ``c``, ``r``, ``o``...) directly.
+    ``contact_point`` (3,) mm is the known contact point of a fixed sensor.
+    """
+    if "kind" not in sensor:
+        geometry = {key: np.asarray(value, dtype=np.float64) for key, value in sensor.items()}
+    else:
+        kind = sensor["kind"]
+        names = {"plane": {"point": "q", "normal": "n"}, "line": {"point": "p", "direction": "d"},
+                 "sphere": {"center": "c", "radius": "r"}, "cylinder": {"point": "p", "axis": "d", "radius": "r"},
+                 "point": {"point": "c"}}
+        if kind not in names:
+            raise ValueError(f"unknown sensor kind {kind!r}; choose from {', '.join(names)}")
+        geometry = {names[kind][key]: np.asarray(value, dtype=np.float64)
+                    for key, value in sensor.items() if key in names[kind]}
+        for key in ("n", "d"):
+            if key in geometry:
+                geometry[key] = geometry[key] / np.linalg.norm(geometry[key])
+    if ctype.sensor_fixed and "o" not in geometry:
+        if contact_point is None:
+            if ctype.sensor != "P":
+                raise ValueError(f"a fixed {ctype.sensor} sensor needs its contact point")
+            contact_point = geometry["c"]
+        geometry["o"] = np.asarray(contact_point, dtype=np.float64)
+    return geometry
+
+
+
+def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fixture=None,
+                  contact_point=None) -> TouchGroup:
+    """One touch of any contact type: the sensor element's geometry in the measurement frame.
+
+    ``sensor`` see :func:`sensor_geometry`; ``fixture`` optional extra
+    fixture-frame keys of a fixed fixture side (its known contact point ``o``).
+    ``rho`` (mm) defaults to the sum of the radii of the two elements, the
+    offset of two convex elements touching from outside (a ball tip on a
+    plane: its radius; on a sphere: both radii; a plane sensor on a cylinder:
+    the cylinder's radius).
+    """
+    ctype = ContactType.parse(contact)
+    if ctype.fixture != feature.element:
+        raise ValueError(
+            f"contact {contact} touches a {ctype.fixture} element but feature {feature.id} is a {feature.kind}"
+        )
+    geometry = {key: value[None] for key, value in sensor_geometry(ctype, sensor, contact_point).items()}
+    side = make_side(ctype.sensor, ctype.sensor_fixed, **geometry)
+    extra = {key: np.asarray(value, dtype=np.float64) for key, value in (fixture or {}).items()}
+    if ctype.fixture_fixed and "o" in extra and "u" not in extra and feature.kind in ("plane", "sphere", "cylinder"):
+        extra["u"] = feature.normal_at(extra["o"])[0]
+    fside = fixture_side(feature, ctype.fixture_fixed, **extra)
+    if rho is None:
+        rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(getattr(feature, "radius", 0.0))
+    centre = placement_centre(ctype.sensor, geometry, None if contact_point is None else np.reshape(contact_point, (1, 3)))
+    return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre)
+
+
+
+def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=None):
+    """Touch groups from point touches by feature id and generic contact touches.
+
+    ``approaches`` optional dict id -> (n, 3): probe approach directions of the touches.
+    """
+    approaches = approaches or {}
+    groups, index = [], 0
+    for feature_id, points in touches.items():
+        if feature_id not in features:
+            raise ValueError(f"unknown feature {feature_id!r}; features are {', '.join(features)}")
+        pts = np.asarray(points, dtype=np.float64)
+        if pts.ndim == 1 and pts.size == 3:
+            pts = pts[None]
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ValueError(f"touches on {feature_id} must have shape (n, 3) in mm, got shape {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            raise ValueError(f"touches on {feature_id} must be finite, got NaN or inf")
+        if len(pts) == 0:
+            continue
+        ids = np.arange(index, index + len(pts))
+        index += len(pts)
+        group = point_touches(features[feature_id], pts, ids, ball_radius_mm)
+        if feature_id in approaches:
+            approach = np.asarray(approaches[feature_id], dtype=np.float64).reshape(-1, 3)
+            if approach.shape != pts.shape:
+                raise ValueError(f"approaches on {feature_id} must have shape {pts.shape}, got {approach.shape}")
+            group.approach = approach
+        groups.append(group)
+    for contact in contacts:
+        feature_id = contact.get("feature")
+        if feature_id not in features:
+            raise ValueError(f"unknown feature {feature_id!r}; features are {', '.join(features)}")
+        groups.append(
+            contact_touch(
+                features[feature_id], contact["contact"], contact["sensor"], index,
+                contact.get("rho"), contact.get("fixture"), contact.get("point"),
+            )
+        )
+        index += 1
+    return groups

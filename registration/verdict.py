@@ -1,0 +1,120 @@
+"""The verdict on a candidate pose: its rank, the residual test and whether its touches could happen.
+
+A candidate passes when its residual passes a chi-square test and its touches
+are admissible: inside their features' finite patches, touched from outside
+when the probe's approach is known.
+
+This module imports numpy and scipy only and nothing of fixturecad: it is
+inlined into the generated standalone ``register.py``.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import gammaincinv
+
+from .mobility import jacobian_rank
+from .pose import fixture2meas_from_rt, rotation_angle, skew
+
+CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
+
+EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
+
+EXTENT_SIGMAS = 3.0  # ... plus this many standard deviations of the touch's position under the pose
+
+SAME_POSE_ROTATION_RAD = 1e-4
+
+SAME_POSE_TRANSLATION_MM = 1e-3
+
+
+
+def same_pose(a, b):
+    return (
+        rotation_angle(a[0] @ b[0].T) < SAME_POSE_ROTATION_RAD
+        and np.linalg.norm(a[1] - b[1]) < SAME_POSE_TRANSLATION_MM
+    )
+
+
+
+@dataclass
+class Solution:
+    rotation: np.ndarray
+    translation: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    rank: int = 6
+    passes: bool = True
+    admissible: bool = True
+    outside: list = field(default_factory=list)
+
+    @property
+    def fixture2meas(self):
+        return fixture2meas_from_rt(self.rotation, self.translation)
+
+    @property
+    def cost(self):
+        return float(self.residuals @ self.residuals)
+
+    @property
+    def rms(self):
+        return float(np.sqrt(np.mean(self.residuals**2))) if len(self.residuals) else 0.0
+
+
+
+def chi_square_quantile(probability, dof):
+    """The chi-square quantile (scipy.stats.chi2.ppf without importing scipy.stats)."""
+    return 2.0 * float(gammaincinv(0.5 * dof, probability))
+
+
+
+def chi_square_passes(cost, rows, rank, sigma):
+    dof = max(rows - rank, 1)
+    return cost / sigma**2 <= chi_square_quantile(CHI2_CONFIDENCE, dof)
+
+
+
+def inadmissible(problem, rotation, translation, jacobian=None, tolerance=EXTENT_TOLERANCE_MM):
+    """Touch indices that cannot have happened at this pose.
+
+    A touch is inadmissible when its contact, mapped into the fixture frame,
+    lies off the feature's finite patch, or when the probe's approach
+    direction (if known) points along the outward surface normal there. With
+    the Jacobian, the patch is widened by three standard deviations of where
+    the pose puts each touch, so a poorly determined pose is not refused for
+    its own uncertainty.
+    """
+    twist_cov = None
+    if jacobian is not None:
+        F = jacobian.T @ jacobian
+        if np.linalg.cond(F) < 1e14:
+            twist_cov = problem.sigma**2 * np.linalg.inv(F)
+    bad = set()
+    for g in problem.groups:
+        if g.points is None:
+            continue
+        local = (g.points - translation) @ rotation
+        slack = tolerance
+        if twist_cov is not None:
+            # A spatial twist moves the touch's fixture point p by omega x p + v.
+            spread = np.zeros(len(g.points))
+            for k, point in enumerate(g.points):
+                J = np.hstack([-skew(point), np.eye(3)])
+                spread[k] = np.sqrt(max(np.trace(J @ twist_cov @ J.T), 0.0))
+            slack = tolerance + EXTENT_SIGMAS * spread
+        inside = np.asarray(g.feature.contains(local, slack))
+        bad.update(int(i) for i in g.index[~inside])
+        if g.approach is not None and g.feature.kind in ("plane", "sphere", "cylinder"):
+            outward = g.feature.normal_at(local) @ rotation.T
+            away = np.einsum("ij,ij->i", outward, g.approach) > 0.0
+            bad.update(int(i) for i in g.index[away & np.all(np.isfinite(g.approach), axis=1)])
+    return sorted(bad)
+
+
+
+def judged(problem, candidate, length):
+    """A solution with its rank, residual test and extent check filled in."""
+    candidate.rank = jacobian_rank(candidate.jacobian, length)
+    candidate.passes = chi_square_passes(candidate.cost, len(candidate.residuals), candidate.rank, problem.sigma)
+    candidate.outside = inadmissible(problem, candidate.rotation, candidate.translation, candidate.jacobian)
+    candidate.admissible = not candidate.outside
+    return candidate
