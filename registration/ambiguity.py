@@ -81,7 +81,7 @@ def _patch_samples(feature, count=400, seed=0):
         return feature.point[None]
     size = 50.0
     if kind == "plane":
-        from .contacts import perpendicular_basis
+        from .elements import perpendicular_basis
 
         e1, e2 = perpendicular_basis(feature.normal)
         uv = rng.uniform(-size, size, size=(count, 2))
@@ -90,7 +90,7 @@ def _patch_samples(feature, count=400, seed=0):
         u = rng.normal(size=(count, 3))
         pts = feature.center + feature.radius * u / np.linalg.norm(u, axis=1, keepdims=True)
     elif kind == "cylinder":
-        from .contacts import perpendicular_basis
+        from .elements import perpendicular_basis
 
         e1, e2 = perpendicular_basis(feature.axis)
         lo, hi = feature.extent.interval or (-size, size)

@@ -27,9 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-KINDS = ("P", "L", "PL", "S", "C")
-KIND_NAMES = {"P": "point", "L": "line", "PL": "plane", "S": "sphere", "C": "cylinder"}
-CORE = {"P": "point", "S": "point", "L": "line", "C": "line", "PL": "plane"}
+from .elements import LETTERS, core_offset, element, outward, perpendicular_basis, signed_distance
+
 
 # Keys of side geometry: points move with their body as points, the rest as directions.
 POINT_KEYS = frozenset({"o", "c", "p", "q"})
@@ -51,8 +50,7 @@ class ContactType:
 
     def __post_init__(self):
         for kind in (self.sensor, self.fixture):
-            if kind not in KINDS:
-                raise ValueError(f"unknown element {kind!r}; choose from {', '.join(KINDS)}")
+            element(kind)  # ValueError for an unknown one
         if (self.sensor == "P" and not self.sensor_fixed) or (
             self.fixture == "P" and not self.fixture_fixed
         ):
@@ -93,9 +91,9 @@ class ContactType:
         sides = []
         for part in parts:
             kind, flag = part.split("/")
-            if kind not in KINDS or flag not in ("F", "M"):
+            if kind not in LETTERS or flag not in ("F", "M"):
                 raise ValueError(
-                    f"cannot read contact {text!r}: elements are {', '.join(KINDS)} and sides F or M"
+                    f"cannot read contact {text!r}: elements are {', '.join(LETTERS)} and sides F or M"
                 )
             sides.append((kind, flag == "F"))
         return cls(sides[0][0], sides[0][1], sides[1][0], sides[1][1])
@@ -163,17 +161,22 @@ class _Rows:
 
 
 def _point_on(rows, xl, x, kind, yl, y):
-    """Point ``x`` (key ``o`` of side ``xl``) lies on the element ``y`` of side ``yl``."""
-    if CORE[kind] == "point":
-        r = x - y["c"]
+    """Point ``x`` (key ``o`` of side ``xl``) lies on the element ``y`` of side ``yl``.
+
+    A point or a line: the components of the offset from it; otherwise the
+    element's signed distance: the offset along a plane's normal, the
+    offset's length less the radius of a sphere or a cylinder (:mod:`.elements`).
+    """
+    core = element(kind).core
+    if core == "point":
+        r = core_offset(core, y["c"], None, x)
         if kind == "P":
             for axis, unit in enumerate(_units(r.shape)):
                 rows.add(r[..., axis], {(xl, "o"): unit, (yl, "c"): -unit})
             return
-        length = np.linalg.norm(r, axis=-1)
-        u = r / length[..., None]
-        rows.add(length - y["r"], {(xl, "o"): u, (yl, "c"): -u})
-    elif CORE[kind] == "line":
+        u = outward(core, y["c"], None, x.reshape(-1, 3)).reshape(r.shape)
+        rows.add(signed_distance(core, y["c"], None, y["r"], x), {(xl, "o"): u, (yl, "c"): -u})
+    elif core == "line":
         r = x - y["p"]
         if kind == "L":
             for key in ("e1", "e2"):
@@ -181,13 +184,13 @@ def _point_on(rows, xl, x, kind, yl, y):
                 rows.add(_dot(r, e), {(xl, "o"): e, (yl, "p"): -e, (yl, key): r})
             return
         along = _dot(r, y["d"])
-        w = r - along[..., None] * y["d"]
-        length = np.linalg.norm(w, axis=-1)
-        u = w / length[..., None]
-        rows.add(length - y["r"], {(xl, "o"): u, (yl, "p"): -u, (yl, "d"): -along[..., None] * u})
+        w = core_offset(core, y["p"], y["d"], x)
+        u = w / np.linalg.norm(w, axis=-1)[..., None]
+        rows.add(signed_distance(core, y["p"], y["d"], y["r"], x),
+                 {(xl, "o"): u, (yl, "p"): -u, (yl, "d"): -along[..., None] * u})
     else:
-        r = x - y["q"]
-        rows.add(_dot(y["n"], r), {(xl, "o"): y["n"], (yl, "q"): -y["n"], (yl, "n"): r})
+        rows.add(signed_distance(core, y["q"], y["n"], 0.0, x),
+                 {(xl, "o"): y["n"], (yl, "q"): -y["n"], (yl, "n"): x - y["q"]})
 
 
 def _line_tangent(rows, xl, x, kind, yl, y):
@@ -240,7 +243,7 @@ def _fixed_mobile(rows, xl, X, x, yl, Y, y, rho):
         return
     # A fixed surface: the core of Y sits at the offset point o + rho u.
     target = x["o"] + rho[..., None] * x["u"]
-    core = CORE[Y.kind]
+    core = element(Y.kind).core
     if core == "point":
         r = target - y["c"]
         for axis, unit in enumerate(_units(r.shape)):
@@ -262,9 +265,9 @@ def _mobile_mobile(rows, A, a, B, b, rho):
     """One row: the signed distance between the two cores equals rho."""
     sides = [("A", A, a), ("B", B, b)]
     order = {"point": 0, "line": 1, "plane": 2}
-    sides.sort(key=lambda side: order[CORE[side[1].kind]])
+    sides.sort(key=lambda side: order[element(side[1].kind).core])
     (l1, s1, g1), (l2, s2, g2) = sides
-    cores = (CORE[s1.kind], CORE[s2.kind])
+    cores = (element(s1.kind).core, element(s2.kind).core)
     if cores == ("point", "point"):
         r = g1["c"] - g2["c"]
         length = np.linalg.norm(r, axis=-1)
@@ -397,15 +400,6 @@ def residuals_and_jacobian(ctype, sensor: Side, fixture: Side, rotation, transla
             else:
                 jacobian[:, row, :3] += np.cross(np.broadcast_to(moved[key], (n, 3)), g)
     return values, jacobian
-
-
-def perpendicular_basis(v):
-    """Two unit vectors perpendicular to unit ``v`` and to each other, shape like ``v``."""
-    v = np.asarray(v, dtype=float)
-    helper = np.where(np.abs(v[..., :1]) < 0.9, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
-    e1 = np.cross(v, helper)
-    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
-    return e1, np.cross(v, e1)
 
 
 def make_side(kind: str, fixed: bool, **geometry) -> Side:

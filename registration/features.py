@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-KINDS = ("plane", "sphere", "cylinder", "line", "point")
-ELEMENTS = {"plane": "PL", "sphere": "S", "cylinder": "C", "line": "L", "point": "P"}
+from .elements import KINDS, closest_point, element, outward, signed_distance
+
 SENSING = ("mobile", "fixed")
 UNIT_TOLERANCE = 1e-9  # how far from 1 a given "unit" vector may be before it is refused
 
@@ -79,22 +79,6 @@ def check_radius(radius, name="radius"):
     if not np.isfinite(value) or value <= 0.0:
         raise ValueError(f"{name} must be a positive finite number of mm, got {radius!r}")
     return value
-
-
-def _perpendicular(direction):
-    """A unit vector perpendicular to the unit ``direction``."""
-    helper = np.eye(3)[int(np.argmin(np.abs(direction)))]
-    v = np.cross(direction, helper)
-    return v / np.linalg.norm(v)
-
-
-def _unit_rows(vectors, fallback):
-    """Normalise rows of ``vectors`` (n, 3); rows of zero length become ``fallback`` (3,)."""
-    length = np.linalg.norm(vectors, axis=1)
-    out = np.broadcast_to(fallback, vectors.shape).copy()
-    good = length > 1e-12
-    out[good] = vectors[good] / length[good, None]
-    return out
 
 
 @dataclass
@@ -189,18 +173,36 @@ def _check_sensing(sensing):
 
 
 class _Feature:
-    """Shared behaviour; subclasses define the geometry."""
+    """Shared behaviour: the distances of the element table, the patch, the JSON entry.
+
+    A subclass names its element (``kind``) and where its core and radius are.
+    """
 
     kind = ""
 
     @property
     def element(self) -> str:
         """The paper's element letter: PL, S, C, L or P."""
-        return ELEMENTS[self.kind]
+        return element(self.kind).letter
+
+    def _core(self):
+        """(core, anchor, direction, radius) of the element table's distances."""
+        raise NotImplementedError
+
+    def signed_distance(self, points):
+        core, anchor, direction, radius = self._core()
+        return signed_distance(core, anchor, direction, radius, check_points(points))
+
+    def normal_at(self, points):
+        core, anchor, direction, _ = self._core()
+        return outward(core, anchor, direction, check_points(points))
+
+    def closest_point(self, points):
+        core, anchor, direction, radius = self._core()
+        return closest_point(core, anchor, direction, radius, check_points(points))
 
     def contains(self, points, tol_mm=1e-6):
         """Whether each point, projected on the feature, lies on its finite patch, shape (n,) bool."""
-        points = check_points(points)
         projected = self.closest_point(points)
         return self.extent.margin(projected, self._parameter(projected)) >= -tol_mm
 
@@ -210,7 +212,7 @@ class _Feature:
     def to_json(self) -> dict:
         """The ``features[]`` entry of features.json: id, kind, element, sensing, geometry, extent."""
         out = {"id": self.id, "kind": self.kind, "element": self.element, "sensing": self.sensing}
-        for key in _GEOMETRY_KEYS[self.kind]:
+        for key in element(self.kind).json_keys:
             value = getattr(self, key)
             out[key] = value.tolist() if isinstance(value, np.ndarray) else float(value)
         if self.kind != "point":
@@ -219,18 +221,10 @@ class _Feature:
 
 
 class _Axial(_Feature):
-    """Cylinders and lines: geometry measured from an axis through ``point``."""
-
-    def _direction(self):
-        raise NotImplementedError
+    """Cylinders and lines: the axial parameter t along the axis through ``point``."""
 
     def _parameter(self, points):
-        return (check_points(points) - self.point) @ self._direction()
-
-    def _radial(self, points):
-        points = check_points(points)
-        r = points - self.point
-        return r - np.outer(r @ self._direction(), self._direction())
+        return (check_points(points) - self.point) @ self._core()[2]
 
 
 @dataclass
@@ -250,15 +244,8 @@ class Plane(_Feature):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def signed_distance(self, points):
-        return (check_points(points) - self.point) @ self.normal
-
-    def closest_point(self, points):
-        points = check_points(points)
-        return points - np.outer(self.signed_distance(points), self.normal)
-
-    def normal_at(self, points):
-        return np.tile(self.normal, (len(check_points(points)), 1))
+    def _core(self):
+        return "plane", self.point, self.normal, 0.0
 
 
 @dataclass
@@ -278,15 +265,8 @@ class Sphere(_Feature):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def signed_distance(self, points):
-        return np.linalg.norm(check_points(points) - self.center, axis=1) - self.radius
-
-    def normal_at(self, points):
-        points = check_points(points)
-        return _unit_rows(points - self.center, np.array([0.0, 0.0, 1.0]))
-
-    def closest_point(self, points):
-        return self.center + self.radius * self.normal_at(points)
+    def _core(self):
+        return "point", self.center, None, self.radius
 
 
 @dataclass
@@ -308,18 +288,8 @@ class Cylinder(_Axial):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def _direction(self):
-        return self.axis
-
-    def signed_distance(self, points):
-        return np.linalg.norm(self._radial(points), axis=1) - self.radius
-
-    def normal_at(self, points):
-        return _unit_rows(self._radial(points), _perpendicular(self.axis))
-
-    def closest_point(self, points):
-        points = check_points(points)
-        return points - self._radial(points) + self.radius * self.normal_at(points)
+    def _core(self):
+        return "line", self.point, self.axis, self.radius
 
 
 @dataclass
@@ -339,19 +309,8 @@ class Line(_Axial):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def _direction(self):
-        return self.direction
-
-    def signed_distance(self, points):
-        return np.linalg.norm(self._radial(points), axis=1)
-
-    def normal_at(self, points):
-        """Unit direction from the line to each point (an arbitrary perpendicular on the line)."""
-        return _unit_rows(self._radial(points), _perpendicular(self.direction))
-
-    def closest_point(self, points):
-        points = check_points(points)
-        return points - self._radial(points)
+    def _core(self):
+        return "line", self.point, self.direction, 0.0
 
 
 @dataclass
@@ -368,30 +327,11 @@ class Point(_Feature):
         self.sensing = _check_sensing(self.sensing)
         self.extent = Extent()
 
-    def signed_distance(self, points):
-        return np.linalg.norm(check_points(points) - self.point, axis=1)
-
-    def normal_at(self, points):
-        return _unit_rows(check_points(points) - self.point, np.array([0.0, 0.0, 1.0]))
-
-    def closest_point(self, points):
-        return np.tile(self.point, (len(check_points(points)), 1))
+    def _core(self):
+        return "point", self.point, None, 0.0
 
 
-# ``normal`` is the geometry attribute of a plane (its unit normal), so the
-# method every feature has is ``normal_at(points)``. Features without a
-# ``normal`` attribute also answer to ``normal(points)``.
-for _cls in (Sphere, Cylinder, Line, Point):
-    _cls.normal = _cls.normal_at
-
-FEATURE_CLASSES = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder, "line": Line, "point": Point}
-_GEOMETRY_KEYS = {
-    "plane": ("point", "normal"),
-    "sphere": ("center", "radius"),
-    "cylinder": ("point", "axis", "radius"),
-    "line": ("point", "direction"),
-    "point": ("point",),
-}
+FEATURE_CLASSES = {cls.kind: cls for cls in (Plane, Sphere, Cylinder, Line, Point)}
 
 
 def feature_from_json(data: dict):
@@ -399,10 +339,11 @@ def feature_from_json(data: dict):
     kind = data.get("kind")
     if kind not in FEATURE_CLASSES:
         raise ValueError(f"unknown feature kind {kind!r}; choose from {', '.join(KINDS)}")
-    missing = [key for key in ("id",) + _GEOMETRY_KEYS[kind] if key not in data]
+    keys = element(kind).json_keys
+    missing = [key for key in ("id",) + keys if key not in data]
     if missing:
         raise ValueError(f"{kind} feature is missing {', '.join(missing)}")
-    kwargs = {key: data[key] for key in _GEOMETRY_KEYS[kind]}
+    kwargs = {key: data[key] for key in keys}
     if kind != "point":
         kwargs["extent"] = Extent.from_json(data.get("extent"))
     if "sensing" in data:

@@ -1,4 +1,7 @@
-"""Mobility: the rank of stacked constraint rows, with one tolerance.
+"""Mobility: the rank and the null space of stacked constraint rows, with one tolerance.
+
+The registration's Jacobians, the catalogue's wrenches and the analysis of a
+set of contacts all decide rank here.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
@@ -9,11 +12,23 @@ import numpy as np
 RANK_TOLERANCE = 1e-7  # singular values below this fraction of the largest count as zero
 
 
+def _scaled(matrix, length_mm):
+    """Rotation columns (rad) scaled by a length (mm) so that they weigh like the translation columns."""
+    matrix = np.asarray(matrix, float)
+    return matrix if length_mm is None else matrix / np.array([length_mm] * 3 + [1.0] * 3)
 
-def jacobian_rank(jacobian, length):
-    """Rank of a stacked Jacobian with rotation columns scaled by ``length`` mm."""
-    if len(jacobian) == 0:
+
+def matrix_rank(matrix, length_mm=None) -> int:
+    """Rank of rows (k, 6) over twists (omega, v); ``length_mm`` balances the rotation columns."""
+    if len(matrix) == 0:
         return 0
-    scaled = jacobian / np.array([length] * 3 + [1.0] * 3)
-    s = np.linalg.svd(scaled, compute_uv=False)
+    s = np.linalg.svd(_scaled(matrix, length_mm), compute_uv=False)
     return int(np.sum(s > RANK_TOLERANCE * max(s[0], 1e-300)))
+
+
+def null_space(matrix, length_mm=None) -> np.ndarray:
+    """Vectors (m, n) the rows (k, n) leave free (twists, for n = 6), orthonormal in the scaled coordinates."""
+    matrix = np.asarray(matrix, float)
+    scaled = np.vstack([_scaled(matrix, length_mm), np.zeros((1, matrix.shape[1]))])
+    free = np.linalg.svd(scaled)[2][matrix_rank(matrix, length_mm):]
+    return free if length_mm is None else free / np.array([length_mm] * 3 + [1.0] * 3)

@@ -16,7 +16,7 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
-from .contacts import CORE
+from .elements import element
 
 DEFAULT_SIGMA_MM = 0.005  # touch noise standard deviation assumed by the chi-square test
 
@@ -38,7 +38,7 @@ def placement_centre(kind, geometry, contact_point=None):
         return geometry["o"]
     if contact_point is not None:
         return np.asarray(contact_point, dtype=np.float64)
-    return geometry["q" if CORE[kind] == "plane" else ("c" if CORE[kind] == "point" else "p")]
+    return geometry[{"plane": "q", "point": "c", "line": "p"}[element(kind).core]]
 
 
 

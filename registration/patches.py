@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contacts import perpendicular_basis
+from .elements import perpendicular_basis
 
 GRID = 48  # grid points per side of the window laid over a plane or a cylinder's unrolled surface
 LARGEST_PATCH_MM = 1.0e4  # a patch still open at this size is unbounded

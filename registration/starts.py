@@ -12,7 +12,7 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
-from .contacts import perpendicular_basis
+from .elements import perpendicular_basis
 from .fits import combinations, frame_from, kabsch, plane_normal, sphere_centre_candidates
 from .pose import random_rotation, rotation_aligning, rotation_from_vector
 from .verdict import EXTENT_SIGMAS

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contacts import ContactType, make_side
+from .elements import element
 from .noise import placement_centre
 
 @dataclass
@@ -42,17 +43,12 @@ class TouchGroup:
 
 
 def fixture_side(feature, fixed: bool, **extra):
-    """The contact-model side of a feature in the fixture frame."""
-    kind = feature.kind
-    if kind == "plane":
-        return make_side("PL", fixed, q=feature.point, n=feature.normal, **extra)
-    if kind == "sphere":
-        return make_side("S", fixed, c=feature.center, r=feature.radius, **extra)
-    if kind == "cylinder":
-        return make_side("C", fixed, p=feature.point, d=feature.axis, r=feature.radius, **extra)
-    if kind == "line":
-        return make_side("L", fixed, p=feature.point, d=feature.direction, **extra)
-    return make_side("P", True, c=feature.point, o=feature.point, **extra)
+    """The contact-model side of a feature in the fixture frame (a point is always fixed, at itself)."""
+    el = element(feature.kind)
+    geometry = el.side_geometry({key: getattr(feature, key) for key in el.json_keys})
+    if el.letter == "P":
+        fixed, geometry["o"] = True, feature.point
+    return make_side(el.letter, fixed, **geometry, **extra)
 
 
 
@@ -90,14 +86,8 @@ def sensor_geometry(ctype, sensor, contact_point=None):
     if "kind" not in sensor:
         geometry = {key: np.asarray(value, dtype=np.float64) for key, value in sensor.items()}
     else:
-        kind = sensor["kind"]
-        names = {"plane": {"point": "q", "normal": "n"}, "line": {"point": "p", "direction": "d"},
-                 "sphere": {"center": "c", "radius": "r"}, "cylinder": {"point": "p", "axis": "d", "radius": "r"},
-                 "point": {"point": "c"}}
-        if kind not in names:
-            raise ValueError(f"unknown sensor kind {kind!r}; choose from {', '.join(names)}")
-        geometry = {names[kind][key]: np.asarray(value, dtype=np.float64)
-                    for key, value in sensor.items() if key in names[kind]}
+        names = dict(element(sensor["kind"]).keys)
+        geometry = {names[key]: np.asarray(value, dtype=np.float64) for key, value in sensor.items() if key in names}
         for key in ("n", "d"):
             if key in geometry:
                 geometry[key] = geometry[key] / np.linalg.norm(geometry[key])

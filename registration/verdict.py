@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import gammaincinv
 
-from .mobility import jacobian_rank
+from .mobility import matrix_rank
 from .pose import fixture2meas_from_rt, rotation_angle, skew
 
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
@@ -113,7 +113,7 @@ def inadmissible(problem, rotation, translation, jacobian=None, tolerance=EXTENT
 
 def judged(problem, candidate, length):
     """A solution with its rank, residual test and extent check filled in."""
-    candidate.rank = jacobian_rank(candidate.jacobian, length)
+    candidate.rank = matrix_rank(candidate.jacobian, length)
     candidate.passes = chi_square_passes(candidate.cost, len(candidate.residuals), candidate.rank, problem.sigma)
     candidate.outside = inadmissible(problem, candidate.rotation, candidate.translation, candidate.jacobian)
     candidate.admissible = not candidate.outside

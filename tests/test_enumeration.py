@@ -8,7 +8,6 @@ import pytest
 
 from fixturecad.theory.catalogue import catalogue
 from fixturecad.theory.enumeration import Filters, class_of_contacts, enumerate_classes, expand
-from fixturecad.theory.groups import _rank
 from fixturecad.theory.instances import generic_instance
 
 
@@ -57,9 +56,9 @@ def _brute_force(filters, max_contacts=6):
     for size in range(1, max_contacts + 1):
         for combo in combinations_with_replacement(allowed, size):
             blocks = [generic_instance(e.ctype, rng).wrenches() for e in combo]
-            if _rank(np.vstack(blocks)) < 6:
+            if np.linalg.matrix_rank(np.vstack(blocks)) < 6:
                 continue
-            if all(_rank(np.vstack(blocks[:i] + blocks[i + 1:])) < 6 for i in range(size)):
+            if all(np.linalg.matrix_rank(np.vstack(blocks[:i] + blocks[i + 1:])) < 6 for i in range(size)):
                 total += 1
     return total
 

@@ -95,3 +95,44 @@ def test_features_module_does_not_import_cadquery():
         " for m in sys.modules if m != 'fixturecad')\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_one_element_table():
+    """The schema's feature kinds, the feature classes and the contact letters are the element table's;
+    an unknown kind is an error, never a point."""
+    import json
+    from pathlib import Path
+
+    from fixturecad.registration.elements import ELEMENTS, KINDS, element
+    from fixturecad.registration.features import FEATURE_CLASSES
+    from fixturecad.registration.touches import fixture_side
+
+    schema = json.loads((Path(__file__).parent.parent / "fixturecad" / "schema" / "features.schema.json").read_text())
+    kinds = {schema["$defs"][kind]["properties"]["kind"]["const"] for kind in KINDS}
+    assert kinds == set(KINDS) == set(FEATURE_CLASSES)
+    for e in ELEMENTS:
+        assert schema["$defs"][e.kind]["properties"]["element"]["const"] == e.letter
+        assert set(e.json_keys) <= set(schema["$defs"][e.kind]["required"])
+    with pytest.raises(ValueError, match="unknown element 'torus'"):
+        element("torus")
+
+    class Torus:
+        kind = "torus"
+
+    with pytest.raises(ValueError, match="unknown element"):
+        fixture_side(Torus(), False)
+
+
+def test_distances_are_the_contact_rows():
+    """A point probe's row on a mobile element is the feature's signed distance (one geometry)."""
+    from fixturecad.registration.contacts import ContactType, make_side, residuals_and_jacobian
+    from fixturecad.registration.touches import fixture_side
+
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-30, 30, size=(20, 3))
+    for feature in (Plane("p", [1, 2, 3], [0, 0.6, 0.8]), Sphere("s", [1, 2, 3], 7.0),
+                    Cylinder("c", [1, 2, 3], [0.6, 0, 0.8], 5.0)):
+        ctype = ContactType("P", True, feature.element, False)
+        rows, _ = residuals_and_jacobian(ctype, make_side("P", True, c=points, o=points),
+                                         fixture_side(feature, False), np.eye(3), np.zeros(3))
+        assert np.allclose(rows[:, 0], feature.signed_distance(points), atol=1e-12)

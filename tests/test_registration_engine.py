@@ -9,7 +9,7 @@ import pytest
 from fixturecad.registration.ambiguity import _patch_samples
 from fixturecad.registration.contacts import residuals_and_jacobian
 from fixturecad.registration.engine import register_touches
-from fixturecad.registration.mobility import jacobian_rank
+from fixturecad.registration.mobility import matrix_rank
 from fixturecad.registration.noise import SENSOR_LEVER_MM, is_point_sensor, row_whitening
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.starts import plane_cylinder_starts
@@ -96,7 +96,7 @@ def test_every_contact_stacks_six_minus_d_independent_rows(swap):
         values, jacobian = Problem([group]).evaluate(R, t)
         assert np.abs(values).max() < 1e-8, ctype.name
         assert len(values) == 6 - dim, ctype.name
-        assert jacobian_rank(jacobian, 50.0) == 6 - dim, ctype.name
+        assert matrix_rank(jacobian, 50.0) == 6 - dim, ctype.name
 
 
 # ------------------------------------------------------------------ exact recovery
@@ -279,7 +279,7 @@ def test_three_collinear_touches_on_a_plane_are_underdetermined():
     features, _ = _plan("cube", "default")
     truth = _random_pose(np.random.default_rng(5))
     top = features["top"]
-    from fixturecad.registration.contacts import perpendicular_basis
+    from fixturecad.registration.elements import perpendicular_basis
 
     e1, _ = perpendicular_basis(top.normal)
     line = top.point + np.outer([-5.0, 0.0, 5.0], e1)

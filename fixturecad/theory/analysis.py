@@ -11,7 +11,8 @@ import numpy as np
 
 from fixturecad.theory.catalogue import CLASSES, lookup
 from fixturecad.theory.enumeration import SEARCH_SEED, class_wrenches, locates_minimally
-from fixturecad.theory.groups import Subgroup, _rank
+from fixturecad.registration.mobility import matrix_rank, null_space
+from fixturecad.theory.groups import Subgroup
 from fixturecad.theory.instances import generic_instance, named_entities
 
 ANALYSIS_SEED = 8
@@ -53,11 +54,11 @@ def analyze(names: list[str]) -> Analysis:
     rng = np.random.default_rng(ANALYSIS_SEED)
     instances = [generic_instance(entry.ctype, rng) for entry in entries]
     blocks = [instance.wrenches() for instance in instances]
-    rank = _rank(np.vstack(blocks))
+    rank = matrix_rank(np.vstack(blocks))
     redundant = [
         entries[i].name
         for i in range(len(blocks))
-        if _rank(np.vstack(blocks[:i] + blocks[i + 1:] or [np.zeros((1, 6))])) == rank
+        if matrix_rank(np.vstack(blocks[:i] + blocks[i + 1:] or [np.zeros((1, 6))])) == rank
     ]
     members = sorted((entry.contact_class for entry in entries), key=CLASSES.index)
     mobility = 6 - rank
@@ -75,10 +76,9 @@ def analyze(names: list[str]) -> Analysis:
 
 def describe_freedom(wrenches: np.ndarray, instances) -> list[str]:
     """Name the free motions left by stacked constraint rows, shape (k, 6)."""
-    _, s, vt = np.linalg.svd(np.vstack([wrenches, np.zeros((1, 6))]))
-    free = vt[_rank(wrenches):]
+    free = null_space(wrenches)
     dim = len(free)
-    within = lambda group: _rank(np.vstack([free, group.algebra()])) == dim
+    within = lambda group: matrix_rank(np.vstack([free, group.algebra()])) == dim
     points, lines = named_entities(instances)
     candidates = [(f"spherical motion about {name}", Subgroup("S", p, np.zeros(3))) for name, p in points.items()]
     for name, (p, d) in lines.items():
@@ -91,10 +91,10 @@ def describe_freedom(wrenches: np.ndarray, instances) -> list[str]:
         candidates.append((f"translation along {label}", Subgroup("T1", np.zeros(3), axis)))
     words, covered = [], np.zeros((0, 6))
     for text, group in candidates:
-        if within(group) and _rank(np.vstack([covered, group.algebra()])) > len(covered):
+        if within(group) and matrix_rank(np.vstack([covered, group.algebra()])) > len(covered):
             words.append(text)
             covered = np.vstack([covered, group.algebra()])
-            covered = np.linalg.svd(covered, full_matrices=False)[2][: _rank(covered)]
+            covered = np.linalg.svd(covered, full_matrices=False)[2][: matrix_rank(covered)]
         if len(covered) == dim:
             return words
     # What the named geometry cannot explain: give the screws of the remaining twists.

@@ -12,8 +12,10 @@ from functools import cache
 
 import numpy as np
 
-from fixturecad.registration.contacts import CORE, ContactType
-from fixturecad.theory.groups import Subgroup, _rank, class_name, group_notation, labelled, simplify
+from fixturecad.registration.contacts import ContactType
+from fixturecad.registration.elements import element
+from fixturecad.registration.mobility import matrix_rank, null_space
+from fixturecad.theory.groups import Subgroup, class_name, group_notation, labelled, simplify
 from fixturecad.theory.instances import Instance, generic_instance, named_entities
 
 SEED = 1994  # the catalogue is computed on seeded generic instances
@@ -96,15 +98,13 @@ def _anchor_words(factor: Subgroup, instance: Instance) -> str:
 
 def free_twists(instance: Instance) -> np.ndarray:
     """Basis of the twists the contact leaves free, shape (d, 6)."""
-    wrenches = instance.wrenches()
-    _, s, vt = np.linalg.svd(np.vstack([wrenches, np.zeros((1, 6))]))
-    return vt[_rank(wrenches):]
+    return null_space(instance.wrenches())
 
 
 def symmetry(side) -> Subgroup:
     """The motions that map an element onto itself: the freedom of a mobile side."""
     g = side.geometry
-    core = CORE[side.kind]
+    core = element(side.kind).core
     if core == "point":
         return Subgroup("S", g["c"], np.zeros(3))
     if core == "line":
@@ -130,14 +130,14 @@ def _core_motions(instance: Instance) -> list[Subgroup]:
     for axis in axes:
         candidates += [Subgroup("R", o, axis), Subgroup("T1", o, axis)]
     dim = len(free)
-    within = lambda group: _rank(np.vstack([free, group.algebra()])) == dim
+    within = lambda group: matrix_rank(np.vstack([free, group.algebra()])) == dim
     for group in candidates:
         if group.algebra().shape[0] == dim and within(group):
             return [group]
     rotations = [g for g in candidates if g.kind == "R" and within(g)]
     for i, first in enumerate(rotations):
         for second in rotations[i + 1:]:
-            if _rank(np.vstack([first.algebra(), second.algebra()])) == dim == 2:
+            if matrix_rank(np.vstack([first.algebra(), second.algebra()])) == dim == 2:
                 return _line_side_outward([first, second], instance)
     raise ValueError(f"cannot name the fixed-fixed motions of {instance.ctype.name}")
 

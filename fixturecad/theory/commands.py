@@ -10,13 +10,12 @@ from fixturecad.output import Format, render
 app = typer.Typer()
 
 FormatOption = Annotated[Format, typer.Option("--format", help="table, json, csv or md.")]
-ELEMENTS = ("P", "L", "PL", "S", "C")
 
 
 @app.command()
 def contacts(fmt: FormatOption = Format.table):
     """Tables I, III and IV as computed: contact, elements, F/M, group, dimension, class, description."""
-    from fixturecad.registration.contacts import KIND_NAMES
+    from fixturecad.registration.elements import element
     from fixturecad.theory.catalogue import catalogue
 
     rows = []
@@ -24,7 +23,7 @@ def contacts(fmt: FormatOption = Format.table):
         c = entry.ctype
         rows.append({
             "contact": entry.name,
-            "elements": f"{KIND_NAMES[c.sensor]} - {KIND_NAMES[c.fixture]}",
+            "elements": f"{element(c.sensor).kind} - {element(c.fixture).kind}",
             "sides": f"{'F' if c.sensor_fixed else 'M'} - {'F' if c.fixture_fixed else 'M'}",
             "group": entry.group,
             "dim": entry.dim,
@@ -35,12 +34,14 @@ def contacts(fmt: FormatOption = Format.table):
 
 
 def _elements(text: str | None, option: str):
+    from fixturecad.registration.elements import LETTERS
+
     if text is None:
         return None
     chosen = frozenset(part.strip().upper() for part in text.split(",") if part.strip())
-    unknown = sorted(chosen - set(ELEMENTS))
+    unknown = sorted(chosen - set(LETTERS))
     if unknown or not chosen:
-        raise InputError(f"{option} takes elements from {', '.join(ELEMENTS)} separated by commas, got {text!r}")
+        raise InputError(f"{option} takes elements from {', '.join(LETTERS)} separated by commas, got {text!r}")
     return chosen
 
 

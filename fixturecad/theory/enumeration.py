@@ -17,7 +17,7 @@ from math import comb
 import numpy as np
 
 from fixturecad.theory.catalogue import CLASSES, classes
-from fixturecad.theory.groups import _rank
+from fixturecad.registration.mobility import matrix_rank
 from fixturecad.theory.instances import generic_instance
 
 SEARCH_SEED = 579
@@ -109,14 +109,13 @@ def combinations_of(members, contacts_by_class) -> int:
 def _orthonormal(rows):
     if len(rows) == 0:
         return np.zeros((0, 6))
-    u, s, vt = np.linalg.svd(rows, full_matrices=False)
-    return vt[: int(np.sum(s > 1e-9 * max(1.0, s[0])))]
+    return np.linalg.svd(rows, full_matrices=False)[2][: matrix_rank(rows)]
 
 
 def _is_minimal(blocks, target_rank) -> bool:
     for skip in range(len(blocks)):
         rest = [block for i, block in enumerate(blocks) if i != skip]
-        if rest and _rank(np.vstack(rest)) >= target_rank:
+        if rest and matrix_rank(np.vstack(rest)) >= target_rank:
             return False
     return True
 
@@ -130,7 +129,7 @@ def locates_minimally(members, wrenches, target_rank=6) -> bool:
     if any(members.count(name) > len(wrenches[name]) for name in members):
         return False
     blocks = [wrenches[name][members[:i].count(name)] for i, name in enumerate(members)]
-    return _rank(np.vstack(blocks)) == target_rank and _is_minimal(blocks, target_rank)
+    return matrix_rank(np.vstack(blocks)) == target_rank and _is_minimal(blocks, target_rank)
 
 
 def _search(names, wrenches, target_rank, max_contacts, progress=None):

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from fixturecad.registration.contacts import perpendicular_basis
+from fixturecad.registration.elements import perpendicular_basis
+from fixturecad.registration.mobility import matrix_rank, null_space
 
-TOL = 1e-8
 # Table II notation and degrees of freedom of each kind.
 NOTATION = {"R": "R_u", "T1": "T_u", "T2": "T_P", "C": "C_u", "G3": "G_P", "S": "S_o"}
 DOF = {"R": 1, "T1": 1, "T2": 2, "C": 2, "G3": 3, "S": 3}
@@ -52,10 +52,10 @@ class Subgroup:
         return np.array([rotation(w), translation(e1), translation(e2)])
 
     def contains(self, other: "Subgroup") -> bool:
-        return _rank(np.vstack([self.algebra(), other.algebra()])) == DOF[self.kind]
+        return matrix_rank(np.vstack([self.algebra(), other.algebra()])) == DOF[self.kind]
 
     def intersection_dim(self, other: "Subgroup") -> int:
-        return DOF[self.kind] + DOF[other.kind] - _rank(np.vstack([self.algebra(), other.algebra()]))
+        return DOF[self.kind] + DOF[other.kind] - matrix_rank(np.vstack([self.algebra(), other.algebra()]))
 
     def sample(self, rng: np.random.Generator, scale=1.0) -> np.ndarray:
         """A random element as a 4x4 homogeneous matrix."""
@@ -83,13 +83,6 @@ def adjoint(g) -> np.ndarray:
     return out
 
 
-def _rank(matrix) -> int:
-    if len(matrix) == 0:
-        return 0
-    s = np.linalg.svd(matrix, compute_uv=False)
-    return int(np.sum(s > TOL * max(1.0, s[0])))
-
-
 def product_dimension(factors, rng: np.random.Generator) -> int:
     """Generic dimension of the set of products h1 h2 ... hk, hi in factor i."""
     frame = np.eye(4)
@@ -97,7 +90,7 @@ def product_dimension(factors, rng: np.random.Generator) -> int:
     for factor in factors:
         tangents.append(factor.algebra() @ adjoint(frame).T)
         frame = frame @ factor.sample(rng)
-    return _rank(np.vstack(tangents)) if tangents else 0
+    return matrix_rank(np.vstack(tangents)) if tangents else 0
 
 
 def simplify(chain: list) -> list:
@@ -157,9 +150,7 @@ def _shared_rotation(group: Subgroup, sphere: Subgroup):
     # Rotations about the centre o are (w, o x w); look for one in the span of ``basis``.
     o = sphere.point
     rotations = np.array([np.concatenate([w, np.cross(o, w)]) for w in np.eye(3)])
-    stacked = np.vstack([basis, rotations])
-    _, s, vt = np.linalg.svd(stacked.T)
-    null = vt[np.sum(s > TOL * s[0]):]
+    null = null_space(np.vstack([basis, rotations]).T)
     if len(null) != 1:
         return None
     w = null[0][len(basis):] @ np.eye(3)

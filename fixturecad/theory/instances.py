@@ -10,7 +10,7 @@ from itertools import combinations
 
 import numpy as np
 
-from fixturecad.registration.contacts import ContactType, Side, contact_rows, make_side
+from fixturecad.registration.contacts import ContactType, Side, contact_rows, make_side, residuals_and_jacobian
 
 
 @dataclass
@@ -36,19 +36,10 @@ class Instance:
         return values, grads
 
     def wrenches(self) -> np.ndarray:
-        """Constraint rows as covectors on twists (omega, v) of the fixture, shape (6 - d, 6)."""
-        _, grads = self.rows()
-        geometry = self.fixture.geometry
-        out = np.zeros((len(grads), 6))
-        for row, grad in enumerate(grads):
-            for (label, key), g in grad.items():
-                if label != "B":
-                    continue
-                g = np.reshape(g, 3)
-                out[row, :3] += np.cross(np.reshape(geometry[key], 3), g)
-                if key in ("o", "c", "p", "q"):
-                    out[row, 3:] += g
-        return out
+        """Constraint rows as covectors on twists (omega, v) of the fixture, shape (6 - d, 6):
+        the contact model's twist Jacobian at the identity pose."""
+        _, jacobian = residuals_and_jacobian(self.ctype, self.sensor, self.fixture, np.eye(3), np.zeros(3), self.rho)
+        return jacobian.reshape(-1, 6)
 
 
 def _unit(rng, perpendicular_to=None):

@@ -1,0 +1,117 @@
+"""The element table: points, lines, planes, spheres and cylinders, and their distances.
+
+Every element is a *core* (a point, a line or a plane) grown by a radius: a
+sphere is a point grown by r, a cylinder a line grown by r, and a point, a
+line or a plane has radius 0. That is the paper's observation that makes 41
+contacts fall into 15 classes, and it is why one distance serves them all:
+the offset of a point from the core, less the radius. The contact rows, the
+features' distances, the touch groups, the schema's kinds and the theory's
+generic placements all read this table; an unknown kind is an error.
+
+This module imports numpy only and nothing of fixturecad: it is inlined into
+the generated standalone ``register.py``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Element:
+    """One kind of element.
+
+    ``letter``: the paper's (P, L, PL, S, C); ``kind``: features.json's name;
+    ``core``: point, line or plane; ``keys``: features.json geometry keys, in
+    order, mapped to the contact model's side keys (``c`` a point core, ``p``
+    and ``d`` a line core, ``q`` and ``n`` a plane core, ``r`` a radius).
+    """
+
+    letter: str
+    kind: str
+    core: str
+    keys: tuple
+
+    @property
+    def json_keys(self) -> tuple:
+        return tuple(json for json, _ in self.keys)
+
+    @property
+    def round(self) -> bool:
+        """Whether the element has a radius of its own (a sphere or a cylinder)."""
+        return any(side == "r" for _, side in self.keys)
+
+    def side_geometry(self, geometry: dict) -> dict:
+        """Contact-model keys of the element from its features.json geometry (by json key)."""
+        return {side: geometry[json] for json, side in self.keys}
+
+
+ELEMENTS = (
+    Element("P", "point", "point", (("point", "c"),)),
+    Element("L", "line", "line", (("point", "p"), ("direction", "d"))),
+    Element("PL", "plane", "plane", (("point", "q"), ("normal", "n"))),
+    Element("S", "sphere", "point", (("center", "c"), ("radius", "r"))),
+    Element("C", "cylinder", "line", (("point", "p"), ("axis", "d"), ("radius", "r"))),
+)
+LETTERS = tuple(e.letter for e in ELEMENTS)
+KINDS = tuple(e.kind for e in ELEMENTS)
+_BY_NAME = {**{e.letter: e for e in ELEMENTS}, **{e.kind: e for e in ELEMENTS}}
+
+
+def element(name: str) -> Element:
+    """The element of a letter (``PL``) or a kind (``plane``); ValueError naming the known ones."""
+    try:
+        return _BY_NAME[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown element {name!r}; choose from {', '.join(LETTERS)} "
+                         f"or {', '.join(KINDS)}") from None
+
+
+def perpendicular_basis(v):
+    """Two unit vectors perpendicular to unit ``v`` and to each other, shape like ``v``."""
+    v = np.asarray(v, dtype=float)
+    helper = np.where(np.abs(v[..., :1]) < 0.9, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    e1 = np.cross(v, helper)
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
+    return e1, np.cross(v, e1)
+
+
+def core_offset(core: str, anchor, direction, points):
+    """The offset (n, 3) of points from a core: from its point, from its line (perpendicular part),
+    or along its plane's normal. ``direction``: a line's unit direction or a plane's unit normal."""
+    r = np.asarray(points, float) - anchor
+    if core == "point":
+        return r
+    along = np.sum(r * direction, axis=-1, keepdims=True)
+    return r - along * direction if core == "line" else along * direction
+
+
+def signed_distance(core: str, anchor, direction, radius, points):
+    """Distance (n,) of points from an element, less its radius: positive outside a sphere or a
+    cylinder, along the normal for a plane, unsigned for a point or a line."""
+    offset = core_offset(core, anchor, direction, points)
+    if core == "plane":
+        return np.sum(offset * direction, axis=-1)
+    return np.linalg.norm(offset, axis=-1) - radius
+
+
+def outward(core: str, anchor, direction, points):
+    """Unit directions (n, 3) away from the core through each point (a plane's normal).
+
+    A point on a point or line core has no such direction: an arbitrary one
+    perpendicular to the core is given.
+    """
+    points = np.asarray(points, float).reshape(-1, 3)
+    if core == "plane":
+        return np.tile(direction, (len(points), 1))
+    offset = core_offset(core, anchor, direction, points)
+    fallback = perpendicular_basis(direction)[0] if core == "line" else np.array([0.0, 0.0, 1.0])
+    length = np.linalg.norm(offset, axis=1, keepdims=True)
+    return np.where(length > 1e-12, offset / np.maximum(length, 1e-300), fallback)
+
+
+def closest_point(core: str, anchor, direction, radius, points):
+    """The closest points (n, 3) of an element to the given points."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    offset = core_offset(core, anchor, direction, points)
+    return points - offset + radius * outward(core, anchor, direction, points)
