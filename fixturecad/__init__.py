@@ -1,1 +1,3 @@
-"""fixturecad: touch-sensing reference fixtures from contact group theory."""
+"""fixturecad: design, build and register touch-sensing reference fixtures."""
+
+__version__ = "0.2.0"

@@ -5,22 +5,20 @@ place only when complete, so a failed or interrupted build leaves nothing
 behind and an existing folder is replaced only with ``force``.
 """
 
-import json
 import math
 import os
 import shutil
 import tempfile
-from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from fixturecad import features_json
 from fixturecad.errors import InputError
 from fixturecad.registration.tolerance import DEFAULT_ZONE_MM
 
 if TYPE_CHECKING:
     from fixturecad.templates.base import Template
 
-SCHEMA_ID = "fixturecad.features/1"
 FILES = {"step": "fixture.step", "stl": "fixture.stl", "features": "features.json",
          "preview": "preview.png", "register": "register.py"}
 # Relative agreement required between the BREP volume and the analytic one.
@@ -28,25 +26,9 @@ VOLUME_RELATIVE_TOLERANCE = 1e-6
 # Chord tolerance of the STL tessellation unless asked otherwise, and the accepted range, mm.
 DEFAULT_STL_TOLERANCE_MM = 0.01
 STL_TOLERANCE_RANGE_MM = (1e-4, 1.0)
-# The recorded manufacturing tolerance: its meaning, and the widest zone accepted (a print that bad is no fixture).
-TOLERANCE_DEFINITION = ("ISO 1101 profile tolerance of every sensing patch: each point of the printed patch "
-                        "lies within +-zone_mm/2 of its nominal surface; 0: the part is exact")
-FIXTURE_TOLERANCE_LIMIT_MM = 2.0
+FIXTURE_TOLERANCE_LIMIT_MM = 2.0  # the widest zone accepted: a print that bad is no fixture
 # Chord tolerance of the preview tessellation, as a fraction of the fixture size.
 PREVIEW_CHORD_FRACTION = 0.004
-
-
-def load_schema() -> dict:
-    """The JSON Schema of features.json shipped in the package."""
-    text = resources.files("fixturecad").joinpath("schema/features.schema.json").read_text(encoding="utf-8")
-    return json.loads(text)
-
-
-def validate_document(document: dict) -> None:
-    """Raise jsonschema.ValidationError if ``document`` does not follow the features.json schema."""
-    import jsonschema
-
-    jsonschema.validate(document, load_schema())
 
 
 def check_stl_tolerance(value: float) -> float:
@@ -64,27 +46,9 @@ def check_fixture_tolerance(value: float) -> float:
 
 def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM,
                       fixture_tolerance: float = DEFAULT_ZONE_MM) -> dict:
-    """The features.json content of a template instance (no CAD needed)."""
-    from importlib.metadata import version
-
-    plans = template.touch_plans()
-    return {
-        "schema": SCHEMA_ID,
-        "units": "mm",
-        "generator": f"fixturecad {version('fixturecad')}",
-        "template": template.name,
-        "parameters": template.parameters_json(),
-        "contact_class": template.contact_class,
-        "frame": template.FRAME,
-        "datums": template.DATUMS.to_json(template.DATUM_TEXT),
-        "tolerance": {"zone_mm": fixture_tolerance, "definition": TOLERANCE_DEFINITION},
-        "volume_mm3": template.volume(),
-        "files": {"step": FILES["step"], "stl": FILES["stl"], "stl_tolerance_mm": stl_tolerance,
-                  "preview": FILES["preview"]},
-        "features": [feature.to_json() for feature in template.features()],
-        "touch_plan": plans["default"].touches,
-        "plans": {name: plan.to_json() for name, plan in plans.items()},
-    }
+    """The features.json of a build of ``template`` (no CAD needed)."""
+    files = {"step": FILES["step"], "stl": FILES["stl"], "stl_tolerance_mm": stl_tolerance, "preview": FILES["preview"]}
+    return features_json.document(template, files, fixture_tolerance)
 
 
 def default_target(template: "Template", out_root: Path | None = None) -> Path:
@@ -117,10 +81,13 @@ def build(template: "Template", target: Path, force: bool = False,
 
 
 def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture_tolerance: float, side) -> None:
-    from fixturecad.brep import match_features
-    from fixturecad.mesh import mesh_from_shape, triangulate, write_stl
+    from fixturecad.cad.brep import match_features
+    from fixturecad.cad.export import export
+    from fixturecad.cad.mesh import triangulate
+    from fixturecad.cad.solid import fixture_solid
+    from fixturecad.preview import fixture_scene
 
-    shape = template.solid()
+    shape = fixture_solid(template)
     if not shape.isValid() or len(shape.Solids()) != 1:
         raise RuntimeError(f"{template.slug()}: the CAD kernel did not give one valid solid")
     volume, expected = shape.Volume(), template.volume()
@@ -132,108 +99,13 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
     size = max(shape.BoundingBox().xlen, shape.BoundingBox().ylen, shape.BoundingBox().zlen)
     parts = triangulate(shape, PREVIEW_CHORD_FRACTION * size)
     document = features_document(template, stl_tolerance, fixture_tolerance)
-    (folder / FILES["features"]).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    features_json.write(document, folder / FILES["features"])
     # the side process draws preview.png and writes register.py while we write STEP and STL
-    side.send(_scene(template, features, matches, parts), folder / FILES["preview"],
+    side.send(fixture_scene(template, features, matches, parts), folder / FILES["preview"],
               folder / FILES["features"], folder / FILES["register"])
-    shape.exportStep(str(folder / FILES["step"]))
-    vertices, faces = mesh_from_shape(shape, stl_tolerance)
-    write_stl(folder / FILES["stl"], vertices, faces, template.slug())
+    export(shape, folder / FILES["step"])
+    export(shape, folder / FILES["stl"], stl_tolerance, template.slug())
     side.wait()
-
-
-def write_register_script(document: dict, path: Path) -> None:
-    """register.py beside features.json (run in the side process)."""
-    from fixturecad.registration.generate import write_register_script as generate
-
-    generate(document, path)
-
-
-def _scene(template: "Template", features, matches: dict, parts) -> dict:
-    """Preview data: tessellated faces tagged with their feature, labels, default touch plan."""
-    import numpy as np
-
-    from fixturecad.preview import scene, view_from_direction
-
-    face_owner = {}
-    for feature in features:
-        if feature.kind in ("plane", "sphere", "cylinder"):
-            for index in matches[feature.id]:
-                face_owner[index] = feature.id
-    faces = []
-    for index, (_, nodes, triangles) in enumerate(parts):
-        faces.append((nodes, triangles, face_owner.get(index)))
-    plan = template.touch_plans()["default"]
-    touches, number = [], 0
-    anchors = {}
-    by_id = {feature.id: feature for feature in features}
-    for entry in plan.touches:
-        for point in entry["points"]:
-            number += 1
-            normal = _label_normal(by_id[entry["feature"]], np.array(point), features)
-            touches.append({"point": np.array(point), "normal": normal, "label": str(number),
-                            "text": f"{number:>2} {entry['contact']:<10} {entry['feature']}"})
-            anchors.setdefault(entry["feature"], []).append(point)
-    feature_rows = []
-    for feature in features:
-        segment = None
-        if feature.kind == "line":
-            t0, t1 = feature.extent.interval
-            segment = np.array([feature.point + t0 * feature.direction, feature.point + t1 * feature.direction])
-        if feature.id in anchors:
-            anchor = np.mean(anchors[feature.id], axis=0)
-        else:
-            nodes = np.vstack([parts[i][1] for i in matches[feature.id] if i < len(parts)] or [feature.point])
-            anchor = nodes.mean(axis=0)
-        if feature.kind != "line":
-            anchor = anchor + 0.08 * _span(parts) * feature.normal_at(anchor)[0]
-        normal = _label_normal(feature, anchor, features)
-        feature_rows.append({"id": feature.id, "kind": feature.kind, "element": feature.element,
-                             "anchor": anchor, "normal": normal, "segment": segment})
-    parameters = ", ".join(f"{k} {v:g}" for k, v in template.parameters_json().items() if k != "base")
-    title = (f"{template.name} ({parameters}{', base' if template.base else ''}): {template.contact_class}"
-             f" - default plan, {number} touches")
-    views = tuple(view_from_direction(d) for d in template.VIEW_DIRECTIONS)
-    label_normals = {row["id"]: row["normal"] for row in feature_rows}
-    sensors = [{**_sensor_drawing(entry["sensor"], 0.35 * _span(parts)), "normal": label_normals[entry["feature"]]}
-               for entry in plan.touches if "sensor" in entry]
-    return scene(title, faces, feature_rows, touches, views, sensors)
-
-
-def _sensor_drawing(sensor: dict, size: float) -> dict:
-    """A non-point sensor of the plan as something to draw: a square of the plane or a segment of the line."""
-    import numpy as np
-
-    point = np.array(sensor["point"])
-    if sensor["kind"] == "line":
-        d = np.array(sensor["direction"])
-        return {"kind": "line", "points": np.array([point - size * d, point + size * d])}
-    n = np.array(sensor["normal"])
-    a = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
-    a /= np.linalg.norm(a)
-    b = np.cross(n, a)
-    corners = [point + size / 2 * (sa * a + sb * b) for sa, sb in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
-    return {"kind": "plane", "points": np.array(corners)}
-
-
-def _label_normal(feature, anchor, features):
-    """Outward normal used to hide a label from views that face away; for a line or point, the
-    mean normal of the surfaces that meet there."""
-    import numpy as np
-
-    if feature.kind not in ("line", "point"):
-        return feature.normal_at(anchor)[0]
-    near = [f.normal_at(anchor)[0] for f in features
-            if f.kind in ("plane", "sphere", "cylinder") and abs(f.signed_distance(anchor)[0]) < 1e-6 and f.contains(anchor)[0]]
-    total = np.sum(near, axis=0) if near else np.zeros(3)
-    return total / np.linalg.norm(total) if np.linalg.norm(total) > 1e-9 else None
-
-
-def _span(parts) -> float:
-    import numpy as np
-
-    nodes = np.vstack([p[1] for p in parts])
-    return float((nodes.max(axis=0) - nodes.min(axis=0)).max())
 
 
 def _umask() -> int:

@@ -1,6 +1,5 @@
 """CLI: ``fixturecad calibrate``: the as-built fixture from points measured on the printed part."""
 
-import json
 import shutil
 from datetime import datetime, timezone
 from pathlib import Path
@@ -8,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from fixturecad import features_json
 from fixturecad.errors import InputError
 
 app = typer.Typer()
@@ -35,7 +35,7 @@ def calibrate(
     out_dir = Path(out_dir)
     if not (sigma > 0 and np.isfinite(sigma)):
         raise InputError(f"--sigma must be a positive number of mm, got {sigma}")
-    document = _read_document(out_dir)
+    document = features_json.read(out_dir)
     if "calibration" in document:
         raise InputError(f"{out_dir} is already an as-built folder: calibrate the folder it was made from")
     target = Path(out) if out is not None else out_dir.with_name(out_dir.name + "-asbuilt")
@@ -55,16 +55,6 @@ def calibrate(
     _write(out_dir, target, as_built, result, zone, force)
     typer.echo(format_report(as_built["calibration"], zone))
     typer.echo(f"as-built fixture: {target}")
-
-
-def _read_document(out_dir: Path) -> dict:
-    path = out_dir / "features.json"
-    if not path.is_file():
-        raise InputError(f"no features.json in {out_dir}: run fixturecad build first")
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise InputError(f"{path} is not valid JSON: {error.msg}") from None
 
 
 def _as_built_document(document, result, measurements: Path, zone_mm: float) -> dict:
@@ -126,7 +116,7 @@ def _write(out_dir: Path, target: Path, document: dict, result, zone_mm: float, 
         for name in COPIED:
             if (out_dir / name).is_file():
                 shutil.copy2(out_dir / name, staging / name)
-        (staging / "features.json").write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+        features_json.write(document, staging / features_json.NAME)
         write_register_script(document, staging / "register.py")
         plot_calibration(document, zone_mm, staging / REPORT_NAME)
         if target.exists():

@@ -35,6 +35,83 @@ def scene(title: str, faces: list, features: list, touches: list, views=VIEWS, s
             "sensors": list(sensors)}
 
 
+def fixture_scene(template, features, matches: dict, parts) -> dict:
+    """Preview data: tessellated faces tagged with their feature, labels, default touch plan."""
+    face_owner = {}
+    for feature in features:
+        if feature.kind in ("plane", "sphere", "cylinder"):
+            for index in matches[feature.id]:
+                face_owner[index] = feature.id
+    faces = []
+    for index, (_, nodes, triangles) in enumerate(parts):
+        faces.append((nodes, triangles, face_owner.get(index)))
+    plan = template.touch_plans()["default"]
+    touches, number = [], 0
+    anchors = {}
+    by_id = {feature.id: feature for feature in features}
+    for entry in plan.touches:
+        for point in entry["points"]:
+            number += 1
+            normal = _label_normal(by_id[entry["feature"]], np.array(point), features)
+            touches.append({"point": np.array(point), "normal": normal, "label": str(number),
+                            "text": f"{number:>2} {entry['contact']:<10} {entry['feature']}"})
+            anchors.setdefault(entry["feature"], []).append(point)
+    feature_rows = []
+    for feature in features:
+        segment = None
+        if feature.kind == "line":
+            t0, t1 = feature.extent.interval
+            segment = np.array([feature.point + t0 * feature.direction, feature.point + t1 * feature.direction])
+        if feature.id in anchors:
+            anchor = np.mean(anchors[feature.id], axis=0)
+        else:
+            nodes = np.vstack([parts[i][1] for i in matches[feature.id] if i < len(parts)] or [feature.point])
+            anchor = nodes.mean(axis=0)
+        if feature.kind != "line":
+            anchor = anchor + 0.08 * _span(parts) * feature.normal_at(anchor)[0]
+        normal = _label_normal(feature, anchor, features)
+        feature_rows.append({"id": feature.id, "kind": feature.kind, "element": feature.element,
+                             "anchor": anchor, "normal": normal, "segment": segment})
+    parameters = ", ".join(f"{k} {v:g}" for k, v in template.parameters_json().items() if k != "base")
+    title = (f"{template.name} ({parameters}{', base' if template.base else ''}): {template.contact_class}"
+             f" - default plan, {number} touches")
+    views = tuple(view_from_direction(d) for d in template.VIEW_DIRECTIONS)
+    label_normals = {row["id"]: row["normal"] for row in feature_rows}
+    sensors = [{**_sensor_drawing(entry["sensor"], 0.35 * _span(parts)), "normal": label_normals[entry["feature"]]}
+               for entry in plan.touches if "sensor" in entry]
+    return scene(title, faces, feature_rows, touches, views, sensors)
+
+
+def _sensor_drawing(sensor: dict, size: float) -> dict:
+    """A non-point sensor of the plan as something to draw: a square of the plane or a segment of the line."""
+    point = np.array(sensor["point"])
+    if sensor["kind"] == "line":
+        d = np.array(sensor["direction"])
+        return {"kind": "line", "points": np.array([point - size * d, point + size * d])}
+    n = np.array(sensor["normal"])
+    a = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    corners = [point + size / 2 * (sa * a + sb * b) for sa, sb in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    return {"kind": "plane", "points": np.array(corners)}
+
+
+def _label_normal(feature, anchor, features):
+    """Outward normal used to hide a label from views that face away; for a line or point, the
+    mean normal of the surfaces that meet there."""
+    if feature.kind not in ("line", "point"):
+        return feature.normal_at(anchor)[0]
+    near = [f.normal_at(anchor)[0] for f in features
+            if f.kind in ("plane", "sphere", "cylinder") and abs(f.signed_distance(anchor)[0]) < 1e-6 and f.contains(anchor)[0]]
+    total = np.sum(near, axis=0) if near else np.zeros(3)
+    return total / np.linalg.norm(total) if np.linalg.norm(total) > 1e-9 else None
+
+
+def _span(parts) -> float:
+    nodes = np.vstack([p[1] for p in parts])
+    return float((nodes.max(axis=0) - nodes.min(axis=0)).max())
+
+
 def render(data: dict, path) -> None:
     """Draw ``data`` (see :func:`scene`) into a PNG at ``path``."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg

@@ -7,7 +7,9 @@ from typing import Annotated
 
 import typer
 
+from fixturecad import features_json
 from fixturecad.errors import InputError
+from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 
 app = typer.Typer()
 
@@ -16,7 +18,6 @@ app = typer.Typer()
 SUCCESS_TRANSLATION_MM = 0.1
 SUCCESS_ROTATION_DEG = 0.1
 SUCCESS_BOUND_FACTOR = 6.0
-DEFAULT_CHORD_TOLERANCE_MM = 0.01  # STL chord tolerance when features.json does not give it
 PLOT_NAME = "simulation.png"
 SUMMARY_NAME = "simulation.json"
 
@@ -40,22 +41,13 @@ def load_routine(out_dir: Path):
     return module
 
 
-def _read_json(path: Path, what: str) -> dict:
-    if not path.is_file():
-        raise InputError(f"no {path.name} in {path.parent}: run fixturecad build first")
-    try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise InputError(f"{what} {path} is not valid JSON: {error.msg}") from None
-
-
 @app.command()
 def register(
     out_dir: Annotated[Path, typer.Argument(help="Fixture folder written by fixturecad build.")],
     touches: Annotated[Path, typer.Argument(help="Touch file: CSV feature,x,y,z (mm, measurement frame) or JSON.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
-    sigma: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = 0.005,
-    lever: Annotated[float | None, typer.Option(help="Sensor size, mm: plane and line sensors tilt by sigma/lever rad (default: the engine's SENSOR_LEVER_MM).")] = None,
+    sigma: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
+    lever: Annotated[float | None, typer.Option(help=f"Sensor size, mm: plane and line sensors tilt by sigma/lever rad (default {SENSOR_LEVER_MM:g} mm).")] = None,
     ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres).")] = None,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
 ):
@@ -88,8 +80,8 @@ def register(
 def simulate(
     out_dir: Annotated[Path, typer.Argument(help="Fixture folder written by fixturecad build.")],
     trials: Annotated[int, typer.Option(help="Number of simulated registrations.")] = 1000,
-    noise: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = 0.005,
-    lever: Annotated[float | None, typer.Option(help="Sensor size, mm: plane and line sensors tilt by noise/lever rad (default: the engine's SENSOR_LEVER_MM).")] = None,
+    noise: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
+    lever: Annotated[float | None, typer.Option(help=f"Sensor size, mm: plane and line sensors tilt by noise/lever rad (default {SENSOR_LEVER_MM:g} mm).")] = None,
     plan: Annotated[Positions, typer.Option(help="Touch positions: the plan's nominal points or random ones on the same features.")] = Positions.default,
     touch_plan: Annotated[str, typer.Option(help="Named touch plan of features.json.")] = "default",
     seed: Annotated[int, typer.Option(help="Seed of the random generator.")] = 0,
@@ -117,7 +109,7 @@ def simulate(
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
-    document = _read_json(out_dir / "features.json", "features file")
+    document = features_json.read(out_dir)
     stl = out_dir / "fixture.stl"
     if not stl.is_file():
         raise InputError(f"no fixture.stl in {out_dir}: run fixturecad build first")
@@ -129,7 +121,7 @@ def simulate(
         raise InputError(str(error).splitlines()[0]) from None
     rng = np.random.default_rng(seed)
     # The residual test allows for the tessellation: chord errors spread over [0, tolerance].
-    chord = float((document.get("files") or {}).get("stl_tolerance_mm", DEFAULT_CHORD_TOLERANCE_MM))
+    chord = float(document["files"]["stl_tolerance_mm"])
     sigma = float(np.sqrt(noise**2 + chord**2 / 3.0))
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
@@ -148,8 +140,6 @@ def simulate(
 def _lever(lever):
     """The sensor lever (mm) of --lever, the engine's default when not given."""
     if lever is None:
-        from fixturecad.registration.noise import SENSOR_LEVER_MM
-
         return SENSOR_LEVER_MM
     if not (lever > 0 and lever < float("inf")):
         raise InputError(f"--lever must be a positive number of mm, got {lever}")

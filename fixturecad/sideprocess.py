@@ -63,7 +63,7 @@ def _warm_imports() -> None:
     axes.set_xlabel("x")
     figure.savefig(io.BytesIO(), format="png")
 
-    import fixturecad.registration.generate  # noqa: F401
+    import fixturecad.registration.generate  # noqa: F401  (warm: it pulls in scipy)
 
 
 def _main() -> None:
@@ -72,8 +72,8 @@ def _main() -> None:
     if not line.strip():
         return  # the parent gave up
     job = json.loads(line)
-    from fixturecad.build import write_register_script
     from fixturecad.preview import render
+    from fixturecad.registration.generate import write_register_script
 
     scene_path = Path(job["scene"])
     scene = pickle.loads(scene_path.read_bytes())

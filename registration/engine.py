@@ -28,7 +28,7 @@ inlined into the generated standalone ``register.py``.
 
 from .ambiguity import features_beyond_tolerance, robust_flag, separating_touch
 from .motions import free_motions
-from .noise import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 from .problem import Problem
 from .solve import solve
 from .touches import build_groups

@@ -12,15 +12,13 @@ from importlib import resources
 from pathlib import Path
 from string import Template
 
-from .noise import DEFAULT_SIGMA_MM
+from fixturecad import __version__
 
 TEMPLATE_NAME = "register.py.tmpl"
-# Embedded modules in load order: each imports only the ones before it.
 # The registration modules register.py carries, loaded on import from its own copy of their sources.
-EMBEDDED_MODULES = ("ambiguity", "contacts", "datums", "deviations", "engine", "features", "fits", "least_squares",
-                    "mobility", "motions", "noise", "patches", "pose", "problem", "solve", "starts", "tolerance",
-                    "touches", "touchfile", "uncertainty", "verdict")
-GENERATOR_VERSION = "0.1.0"
+EMBEDDED_MODULES = ("ambiguity", "contacts", "datums", "defaults", "deviations", "elements", "engine", "features",
+                    "fits", "least_squares", "mobility", "motions", "noise", "patches", "pose", "problem", "solve",
+                    "starts", "tolerance", "touches", "touchfile", "uncertainty", "verdict")
 
 
 def _sources():
@@ -38,9 +36,8 @@ def register_source(features_document: dict) -> str:
     digest = hashlib.sha256((features_json + "".join(sources.values())).encode()).hexdigest()[:12]
     text = template.substitute(
         template=features_document.get("template", "fixture"),
-        version=GENERATOR_VERSION,
+        version=__version__,
         feature_ids=", ".join(entry["id"] for entry in features_document["features"]),
-        sigma_mm=repr(DEFAULT_SIGMA_MM),
         features_json=repr(features_json),
         sources="{\n" + "".join(f"    {name!r}: {source!r},\n" for name, source in sources.items()) + "}",
         digest=digest,

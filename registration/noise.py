@@ -16,11 +16,10 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
+from .defaults import SENSOR_LEVER_MM
 from .elements import element
 
-DEFAULT_SIGMA_MM = 0.005  # touch noise standard deviation assumed by the chi-square test
 
-SENSOR_LEVER_MM = 20.0  # sensor size: its placement tilts by sigma / lever rad about the contact point
 
 
 

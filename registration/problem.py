@@ -7,7 +7,8 @@ inlined into the generated standalone ``register.py``.
 import numpy as np
 
 from .contacts import DIRECTION_KEYS, POINT_KEYS, residuals_and_jacobian
-from .noise import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM, is_point_sensor, placement_centre, whitened
+from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+from .noise import is_point_sensor, placement_centre, whitened
 from .touches import TouchGroup
 
 RADIUS_DERIVATIVE_REACH = 1e-2  # rad and mm: how far the pose may move before a radius derivative is redone

@@ -9,7 +9,7 @@ engine.
 
 import numpy as np
 
-from .noise import SENSOR_LEVER_MM
+from .defaults import SENSOR_LEVER_MM
 from .synthetic import perturb_touches, plan_touches
 from .features import feature_from_json
 from .pose import fixture2meas_from_rt, random_rotation
@@ -26,15 +26,11 @@ def load_mesh(path):
 
 
 def plan_entries(document, plan="default"):
-    """Touch-plan entries of a features.json document: the default plan or a named one."""
+    """Touch-plan entries of a named plan of a features.json document."""
     plans = document.get("plans") or {}
-    if plan in plans:
-        entry = plans[plan]
-        return entry["touch_plan"] if isinstance(entry, dict) else entry
-    if plan == "default" and "touch_plan" in document:
-        return document["touch_plan"]
-    names = sorted(set(plans) | ({"default"} if "touch_plan" in document else set()))
-    raise ValueError(f"unknown touch plan {plan!r}; choose from {', '.join(names)}")
+    if plan not in plans:
+        raise ValueError(f"unknown touch plan {plan!r}; choose from {', '.join(sorted(plans))}")
+    return plans[plan]["touch_plan"]
 
 
 def feature_faces(mesh, feature):

@@ -7,7 +7,7 @@ the generated standalone ``register.py``.
 import numpy as np
 
 from .contacts import ContactType
-from .noise import SENSOR_LEVER_MM
+from .defaults import SENSOR_LEVER_MM
 from .pose import check_fixture2meas, rotation_from_vector
 
 def plan_touches(entries, fixture2meas):

@@ -26,6 +26,8 @@ import sys
 
 import numpy as np
 
+from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
 MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
@@ -173,15 +175,13 @@ def format_result(result):
     return "\n".join(lines)
 
 
-def main(features, register, argv=None, prog="register.py", default_sigma_mm=0.005, default_lever_mm=None):
+def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEFAULT_SIGMA_MM,
+         default_lever_mm=SENSOR_LEVER_MM):
     """Command line: ``register.py touches.csv [--json]``; bad input is one line, exit 2.
 
     The exit code tells the status: 0 unique, 3 ambiguous, 4 underdetermined,
     5 inconsistent (:data:`EXIT_CODES`).
     """
-    from .noise import SENSOR_LEVER_MM
-
-    default_lever_mm = SENSOR_LEVER_MM if default_lever_mm is None else default_lever_mm
     parser = argparse.ArgumentParser(prog=prog, description="Pose of the fixture from touches.")
     parser.add_argument("touches", help="touch file: CSV feature,x,y,z (mm) or JSON")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")

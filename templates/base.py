@@ -2,10 +2,11 @@
 
 A template is a small class in the build123d manner: its parameters (with
 units and ranges) are declared once in ``PARAMS``; an instance holds checked
-values and gives the CadQuery solid, the labelled sensing features (analytic,
+values and gives its CadQuery body, the labelled sensing features (analytic,
 :mod:`fixturecad.registration.features`), the analytic volume and named touch
-plans. CadQuery is imported inside ``solid()`` only, so listing templates and
-reading their features stays fast.
+plans. CadQuery is imported inside ``body()`` only (the rest of the CAD work
+is :mod:`fixturecad.cad`), so listing templates and reading their features
+stays fast.
 
 Touch plans
 -----------
@@ -99,18 +100,6 @@ class Anchor:
         stem = math.pi * self.stem_radius**2 * self.length - self.inside_volume
         return stem + self.plate_size**2 * self.plate_thickness
 
-    def solid(self):
-        """The base (stem + plate) as a CadQuery solid."""
-        import cadquery as cq
-
-        d = cq.Vector(*self.direction)
-        start = cq.Vector(*self.start)
-        stem = cq.Solid.makeCylinder(self.stem_radius, self.length, start, d)
-        x_dir = np.cross(self.direction, np.eye(3)[int(np.argmin(np.abs(self.direction)))])
-        plane = cq.Plane(origin=start + d * self.length, xDir=cq.Vector(*x_dir), normal=d)
-        plate = cq.Workplane(plane).rect(self.plate_size, self.plate_size).extrude(self.plate_thickness).val()
-        return stem.fuse(plate).clean()
-
 
 class Template:
     """Base class: subclasses set the class attributes and the geometry methods."""
@@ -197,17 +186,8 @@ class Template:
         raise NotImplementedError
 
     # -- shared --------------------------------------------------------------
-    def solid(self):
-        """The fixture as one CadQuery solid, with the base fused on when asked."""
-        body = self.body()
-        if not self.base:
-            return body
-        fused = body.fuse(self.anchor().solid()).clean()
-        solids = fused.Solids()
-        return solids[0] if len(solids) == 1 else fused
-
     def volume(self) -> float:
-        """Analytic volume of :meth:`solid`, mm^3."""
+        """Analytic volume of the fixture solid (body and base), mm^3."""
         return self.body_volume() + (self.anchor().volume() if self.base else 0.0)
 
     def feature_map(self) -> dict:

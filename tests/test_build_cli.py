@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from cli import assert_bad_input, run
-from fixturecad.build import build, features_document, load_schema, validate_document
+from fixturecad.build import build, features_document
+from fixturecad.features_json import load_schema, validate
 from fixturecad.cli import main
 from fixturecad.registration.features import feature_from_json
 from fixturecad.templates import TEMPLATES, make
@@ -52,26 +53,27 @@ def test_build_writes_the_four_files(built, name):
 @pytest.mark.parametrize("name", list(TEMPLATES))
 def test_features_json_is_valid_and_round_trips(built, name):
     document = json.loads((built[name] / "features.json").read_text())
-    validate_document(document)
-    assert document["schema"] == "fixturecad.features/1" and document["units"] == "mm"
+    validate(document)
+    assert document["schema"] == "fixturecad.features/2" and document["units"] == "mm"
     fixture = make(name)
     assert document["contact_class"] == fixture.contact_class
     for entry, feature in zip(document["features"], fixture.features()):
         assert feature_from_json(entry).to_json() == feature.to_json()
-    assert document["touch_plan"] == document["plans"]["default"]["touch_plan"]
+    assert "touch_plan" not in document  # the default plan is stored once, in plans
 
 
 def test_schema_refuses_unknown_fields_and_bad_kinds():
     document = features_document(make("cube"))
-    validate_document(document)
+    validate(document)
     for broken in (
         {**document, "colour": "red"},
         {**document, "features": [{**document["features"][0], "kind": "torus"}]},
         {**document, "features": [{**document["features"][0], "extra": 1}]},
-        {**document, "touch_plan": [{**document["touch_plan"][0], "contact": "X/F-PL/M"}]},
+        {**document, "plans": {"default": {**document["plans"]["default"], "touch_plan": [
+            {**document["plans"]["default"]["touch_plan"][0], "contact": "X/F-PL/M"}]}}},
     ):
         with pytest.raises(jsonschema.ValidationError):
-            validate_document(broken)
+            validate(broken)
     assert load_schema()["additionalProperties"] is False
 
 
@@ -96,10 +98,11 @@ def test_stl_is_watertight_consistent_and_close_to_the_volume(built, name):
 
 @pytest.mark.parametrize("tolerance", [0.01, 0.001])
 def test_stl_chord_tolerance_is_absolute_and_honoured(tolerance):
-    from fixturecad.mesh import mesh_from_shape
+    from fixturecad.cad.mesh import mesh_from_shape
+    from fixturecad.cad.solid import fixture_solid
 
     radius = 10.0
-    vertices, faces = mesh_from_shape(make("quarter-sphere", radius=radius).solid(), tolerance)
+    vertices, faces = mesh_from_shape(fixture_solid(make("quarter-sphere", radius=radius)), tolerance)
     tris = vertices[faces]
     on_sphere = np.all(np.abs(np.linalg.norm(tris, axis=2) - radius) < 1e-9, axis=1)
     flat = np.all(np.abs(tris[:, :, 1]) < 1e-9, axis=1) | np.all(np.abs(tris[:, :, 2]) < 1e-9, axis=1)
@@ -197,28 +200,30 @@ def test_cli_help_does_not_import_cadquery():
 
 
 def test_a_failed_build_leaves_nothing_behind(tmp_path, monkeypatch):
-    import fixturecad.mesh
+    import fixturecad.cad.export
+    import fixturecad.cad.mesh
 
     def broken(*args, **kwargs):
-        raise fixturecad.mesh.MeshError("simulated failure")
+        raise fixturecad.cad.mesh.MeshError("simulated failure")
 
-    monkeypatch.setattr(fixturecad.mesh, "write_stl", broken)
-    with pytest.raises(fixturecad.mesh.MeshError):
+    monkeypatch.setattr(fixturecad.cad.export, "write_stl", broken)
+    with pytest.raises(fixturecad.cad.mesh.MeshError):
         build(make("cube", size=10), tmp_path / "cube")
     assert list(tmp_path.iterdir()) == []
 
 
 def test_a_failed_forced_build_keeps_the_old_folder(tmp_path, monkeypatch):
-    import fixturecad.mesh
+    import fixturecad.cad.export
+    import fixturecad.cad.mesh
 
     target = build(make("cube", size=10), tmp_path / "cube")
     before = (target / "features.json").read_text()
 
     def broken(*args, **kwargs):
-        raise fixturecad.mesh.MeshError("simulated failure")
+        raise fixturecad.cad.mesh.MeshError("simulated failure")
 
-    monkeypatch.setattr(fixturecad.mesh, "write_stl", broken)
-    with pytest.raises(fixturecad.mesh.MeshError):
+    monkeypatch.setattr(fixturecad.cad.export, "write_stl", broken)
+    with pytest.raises(fixturecad.cad.mesh.MeshError):
         build(make("cube", size=12), target, force=True)
     assert (target / "features.json").read_text() == before
     assert [p.name for p in tmp_path.iterdir()] == ["cube"]
@@ -247,3 +252,35 @@ def test_template_options_parse_both_spellings_and_refuse_repeats():
     for args, word in ((["--size", "1", "--size", "2"], "twice"), (["50"], "unexpected"), (["--size"], "value")):
         with pytest.raises(InputError, match=word):
             parse_template_options("cube", args)
+
+
+def test_an_older_features_json_is_refused_in_one_line(tmp_path):
+    """A folder built by an older fixturecad is named as such, not read wrongly."""
+    from cli import assert_bad_input, run
+
+    folder = build(make("cube", size=10), tmp_path / "cube")
+    document = json.loads((folder / "features.json").read_text())
+    (folder / "features.json").write_text(json.dumps({**document, "schema": "fixturecad.features/1"}))
+    assert_bad_input(run("simulate", folder, "--trials", 1), "fixturecad.features/1", "rebuild")
+
+
+def test_only_the_cad_room_and_template_bodies_import_the_kernel():
+    """cadquery and OCP are imported in fixturecad/cad/ and inside the templates' body() only."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    offenders = []
+    for path in list((root / "fixturecad").rglob("*.py")) + list((root / "registration").rglob("*.py")) + \
+            list((root / "templates").rglob("*.py")):
+        if "cad" in path.relative_to(root).parts[:2] and path.parts[-2] == "cad":
+            continue
+        tree = ast.parse(path.read_text())
+        bodies = {id(node) for f in ast.walk(tree) if isinstance(f, ast.FunctionDef) and f.name == "body"
+                  and path.parent.name == "templates" for node in ast.walk(f)}
+        for node in ast.walk(tree):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            if any(n.split(".")[0] in ("cadquery", "OCP") for n in names) and id(node) not in bodies:
+                offenders.append(f"{path.relative_to(root)}:{node.lineno}")
+    assert offenders == []

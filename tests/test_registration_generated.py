@@ -31,7 +31,7 @@ def generated_case(tmp_path, name, seed, entries=None):
     write_register_script(document, tmp_path / "register.py")
     rng = np.random.default_rng(seed)
     truth = fixture2meas_from_rt(random_rotation(rng), rng.uniform(-80, 80, 3))
-    touches, contacts = plan_touches(entries or document["touch_plan"], truth)
+    touches, contacts = plan_touches(entries or document["plans"]["default"]["touch_plan"], truth)
     return document, truth, touches, contacts
 
 
@@ -78,7 +78,7 @@ def test_generated_routine_gives_the_library_pose(name, bare_site, tmp_path):
     path = write_register_script(document, tmp_path / "register.py")
     ast.parse(path.read_text())
     features = {f["id"]: f for f in document["features"]}
-    entries = [e for e in document["touch_plan"] if "sensor" not in e] or document["touch_plan"]
+    entries = [e for e in document["plans"]["default"]["touch_plan"] if "sensor" not in e] or document["plans"]["default"]["touch_plan"]
     point_plans = [p["touch_plan"] for p in document["plans"].values() if all("sensor" not in e for e in p["touch_plan"])]
     entries = point_plans[0] if point_plans else entries
     rng = np.random.default_rng(12)

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from fixturecad.brep import match_features, read_faces
+from fixturecad.cad.brep import match_features, read_faces
+from fixturecad.cad.solid import base_solid, fixture_solid
 from fixturecad.errors import InputError
 from fixturecad.fixture_commands import class_members
 from fixturecad.registration.contacts import ContactType
@@ -27,7 +28,7 @@ def instances():
     for name in NAMES:
         for base in (False, True):
             fixture = make(name, base=base)
-            cache[name, base] = (fixture, fixture.solid())
+            cache[name, base] = (fixture, fixture_solid(fixture))
     return cache
 
 
@@ -85,7 +86,7 @@ def test_features_are_faces_and_edges_of_the_solid(instances, name, base):
 @pytest.mark.parametrize("name", NAMES)
 def test_bare_faces_lie_inside_their_feature_extent(instances, name):
     """Without a base, the patch is the whole face: every tessellation node of it is inside the extent."""
-    from fixturecad.mesh import triangulate
+    from fixturecad.cad.mesh import triangulate
 
     fixture, solid = instances[name, False]
     features = fixture.features()
@@ -178,7 +179,7 @@ def test_inclined_plane_cylinder_frame_follows_the_paper():
 @pytest.mark.parametrize("name", NAMES)
 def test_base_never_touches_a_sensing_feature(instances, name):
     fixture, solid = instances[name, True]
-    base = fixture.anchor().solid()
+    base = base_solid(fixture.anchor())
     rng = np.random.default_rng(RNG_SEED)
     for feature in fixture.features():
         patch = _sample_patch(feature, solid, 60, rng)
@@ -244,10 +245,10 @@ def _random_instances(count_per_template: int, seed: int):
 
 @pytest.mark.parametrize("name, base, values", _random_instances(2, seed=516))
 def test_random_valid_parameters_give_valid_solids_meshes_and_plans(name, base, values):
-    from fixturecad.mesh import mesh_from_shape, mesh_volume
+    from fixturecad.cad.mesh import mesh_from_shape, mesh_volume
 
     fixture = make(name, base=base, **values)
-    solid = fixture.solid()
+    solid = fixture_solid(fixture)
     assert solid.isValid() and len(solid.Solids()) == 1
     assert solid.Volume() == pytest.approx(fixture.volume(), rel=1e-6)
     match_features(solid, fixture.features())

@@ -9,6 +9,8 @@ straight edge on the same line.
 from dataclasses import dataclass
 
 import numpy as np
+from OCP.BRepAdaptor import BRepAdaptor_Surface
+from OCP.BRepTools import BRepTools
 
 # How far BREP parameters may stray from the analytic ones, mm (and for unit vectors, 1 - cos).
 MATCH_TOLERANCE_MM = 1e-6
@@ -35,29 +37,31 @@ def read_faces(shape) -> list:
     out = []
     for index, face in enumerate(shape.Faces()):
         geom_type = face.geomType()
-        surface = face._geomAdaptor()
+        surface = BRepAdaptor_Surface(face.wrapped)
         if geom_type == "PLANE":
             center = np.array(face.Center().toTuple())
             normal = np.array(face.normalAt(face.Center()).toTuple())
             samples = center[None, :]
         else:
             # Center() is the centre of mass, off a curved face: use the face's uv box instead
-            u0, u1, v0, v1 = face._uvBounds()
+            u0, u1, v0, v1 = BRepTools.UVBounds_s(face.wrapped)
             grid = [(u0 + (u1 - u0) * a, v0 + (v1 - v0) * b) for a in (0.5, 0.2, 0.8) for b in (0.5, 0.2, 0.8)]
             samples = np.array([p.toTuple() for p in face.positions(grid)])
             center = samples[0]
             normal = np.array(face.normalAt(*grid[0])[0].toTuple())
         params = {}
         if geom_type == "PLANE":
-            params = {"point": np.array(surface.Pln().Location().Coord())}
+            params = {"point": np.array(surface.Plane().Location().Coord())}
         elif geom_type == "SPHERE":
-            params = {"center": np.array(surface.Location().Coord()), "radius": surface.Radius()}
+            sphere = surface.Sphere()
+            params = {"center": np.array(sphere.Location().Coord()), "radius": sphere.Radius()}
         elif geom_type == "CYLINDER":
-            axis = surface.Axis()
+            cylinder = surface.Cylinder()
+            axis = cylinder.Axis()
             params = {
                 "point": np.array(axis.Location().Coord()),
                 "axis": np.array(axis.Direction().Coord()),
-                "radius": surface.Radius(),
+                "radius": cylinder.Radius(),
             }
         out.append(FaceInfo(index, face, geom_type, center, normal, params, samples))
     return out
