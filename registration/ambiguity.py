@@ -38,7 +38,6 @@ def robust_flag(problem, solution):
     return None
 
 
-
 def features_beyond_tolerance(problem, solutions, starts=4):
     """Feature deviations beyond the tolerance that explain touches failing the residual test.
 
@@ -72,7 +71,6 @@ def features_beyond_tolerance(problem, solutions, starts=4):
     return sorted(found, key=lambda item: item[3])
 
 
-
 def _patch_samples(feature, count=400, seed=0):
     """Points (fixture frame) on a feature's finite patch, for choosing an extra touch."""
     rng = np.random.default_rng(seed)
@@ -104,7 +102,6 @@ def _patch_samples(feature, count=400, seed=0):
         pts = feature.point + np.linspace(lo, hi, count)[:, None] * feature.direction
     inside = feature.contains(pts, 1e-6)
     return pts[inside] if inside.any() else pts[:0]
-
 
 
 def separating_touch(features, solutions):

@@ -15,7 +15,6 @@ def plane_normal(points):
     return vt[2]
 
 
-
 def sphere_centres(points, radius):
     """Closed form: candidate centres of a sphere of known radius through points (n >= 3)."""
     points = np.asarray(points, float)
@@ -40,7 +39,6 @@ def sphere_centres(points, radius):
     return [centre + h * u, centre - h * u]
 
 
-
 def kabsch(fixed_points, measured_points):
     """Closed form: the rotation and translation best mapping fixture points onto measured ones."""
     a, b = np.asarray(fixed_points, float), np.asarray(measured_points, float)
@@ -54,7 +52,6 @@ def kabsch(fixed_points, measured_points):
     return R, cb - R @ ca
 
 
-
 def frame_from(normal, axis):
     """Orthonormal frame (3, 3), columns: the normal, the axis made perpendicular to it, their cross."""
     second = axis - (axis @ normal) * normal
@@ -62,13 +59,11 @@ def frame_from(normal, axis):
     return np.column_stack([normal, second, np.cross(normal, second)])
 
 
-
 def combinations(lists, limit=16):
     combos = [[]]
     for options in lists:
         combos = [c + [o] for c in combos for o in options][:limit]
     return combos
-
 
 
 def sphere_centre_candidates(point_groups):

@@ -9,17 +9,11 @@ import numpy as np
 from .pose import apply_twist, rotation_angle
 
 STEP_TOLERANCE = 1e-4  # LM stops once a step moves the touches less than this many sigma
-
 STALLED_AFTER = 4  # LM iterations before a refinement may be abandoned as stalled ...
-
 STALLED_COST_FACTOR = 1e4  # ... while its cost exceeds this many times sigma^2 per row ...
-
 STALLED_DECREASE = 0.5  # ... and one iteration removes less than half of it
-
 NEAR_KNOWN_RAD = 1e-3  # a refinement this close to a found solution is converging onto it
-
 NEAR_KNOWN_MM = 0.05
-
 
 
 def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60, known=(),

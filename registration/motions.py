@@ -24,10 +24,8 @@ def _feature_directions(problem, rotation, features=None):
     return out
 
 
-
 def _vec(v):
     return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
-
 
 
 def free_motions(problem, solution, features=None):

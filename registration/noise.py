@@ -20,9 +20,6 @@ from .defaults import SENSOR_LEVER_MM
 from .elements import element
 
 
-
-
-
 def placement_centre(kind, geometry, contact_point=None):
     """The point (..., 3) mm a sensor's placement error turns about: its contact point.
 
@@ -38,7 +35,6 @@ def placement_centre(kind, geometry, contact_point=None):
     if contact_point is not None:
         return np.asarray(contact_point, dtype=np.float64)
     return geometry[{"plane": "q", "point": "c", "line": "p"}[element(kind).core]]
-
 
 
 def row_whitening(jacobian, centres, lever_mm=SENSOR_LEVER_MM):
@@ -67,12 +63,10 @@ def row_whitening(jacobian, centres, lever_mm=SENSOR_LEVER_MM):
     return np.linalg.inv(L)
 
 
-
 def is_point_sensor(side):
     """A point probe or a ball tip: only shifted by its placement error, its rows' gradients
     along it orthonormal, so :func:`row_whitening` is the identity and is skipped."""
     return side.kind == "P" or (side.kind == "S" and "o" not in side.geometry)
-
 
 
 def whitened(values, jacobian, centres, lever_mm):

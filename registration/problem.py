@@ -162,13 +162,11 @@ class Problem:
         return self._scale
 
 
-
 def _with_centre(group):
     """The group with its sensor placement centres filled in from the sensor's geometry."""
     centre = placement_centre(group.sensor.kind, group.sensor.geometry)
     group.centre = np.broadcast_to(np.asarray(centre, dtype=np.float64), (group.count, 3)).copy()
     return group
-
 
 
 def _merge(groups):
@@ -199,7 +197,6 @@ def _merge(groups):
             centre=np.concatenate([np.broadcast_to(m.centre, (m.count, 3)) for m in members]),
         ))
     return batches
-
 
 
 def _subset(group, keep):

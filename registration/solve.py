@@ -44,11 +44,14 @@ def solve(problem, initial_pose=None, batch=6):
 
 
 def _search(problem, initial_pose, batch):
+    far = False
     if initial_pose is not None:
         T = check_fixture2meas(initial_pose)
-        starts, first_batch, mode = [(T[:3, :3], T[:3, 3])], 1, "nominal"
+        starts, first_batch = [(T[:3, :3], T[:3, 3])], 1
     else:
-        starts, first_batch, mode = best_starts(problem, *initial_poses(problem))
+        found = initial_poses(problem)
+        starts, first_batch = best_starts(problem, found)
+        far = found.far
     length = problem.scale()
     solutions = []
     # The first batch holds every local minimum of the sweep: all solutions are looked for.
@@ -59,7 +62,7 @@ def _search(problem, initial_pose, batch):
         for R, t in starts[first:last]:
             known = [(s.rotation, s.translation) for s in solutions]
             # Far starts (no sweep) may take many slow steps: never abandon them.
-            R, t, r, J = levenberg_marquardt(problem, R, t, known=known, may_give_up=mode != "random")
+            R, t, r, J = levenberg_marquardt(problem, R, t, known=known, may_give_up=not far)
             if any(same_pose((R, t), pose) for pose in known):
                 continue
             solutions.append(judged(problem, Solution(R, t, r, J), length))

@@ -10,6 +10,8 @@ This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .elements import perpendicular_basis
@@ -18,19 +20,12 @@ from .pose import random_rotation, rotation_aligning, rotation_from_vector
 from .verdict import EXTENT_SIGMAS
 
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
-
 PLANE_CYLINDER_STEPS = 180  # axis directions tried on the cone about the plane normal
-
 NORMAL_SWEEP_RAD = np.radians(2.0)  # plane touches this unsure of the normal (3 sigma) sweep it ...
-
 NORMAL_SWEEP_STEPS = 60  # ... in this many turns about their line
-
 CIRCLE_ITERATIONS = 6  # Gauss-Newton steps fitting a circle of the cylinder's radius to the touches
-
 FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
-
 UNSWEPT_PER_BLOCK = 6  # fallback starts per candidate centre refined before stopping at a solution
-
 
 
 def _plane_directions(problem):
@@ -53,7 +48,6 @@ def _plane_directions(problem):
     return [(a, b) for _, a, b in pairs]
 
 
-
 def _anchor(feature):
     for name in ("center", "point"):
         if hasattr(feature, name):
@@ -61,62 +55,92 @@ def _anchor(feature):
     return np.zeros(3)
 
 
+@dataclass
+class Starts:
+    """Starting poses (R, t), in ``blocks`` equal blocks (one per candidate sphere centre).
 
-def initial_poses(problem):
-    """Candidate starting poses (R, t) without a nominal pose: closed forms, then sweeps.
-
-    Returns (starts, blocks, mode): the starts come in ``blocks`` equal
-    blocks (one per candidate sphere centre); ``mode`` is "closed" (closed
-    forms), "sweep" (each block made of sweeps of ``SWEEP_STEPS`` rotations
-    about a measured direction) or "random" (no direction known).
+    ``swept``: each block is made of sweeps of ``SWEEP_STEPS`` rotations about
+    a measured direction, whose local minima are all refined; ``far``: the
+    rotations are random, far from any solution, so a refinement may take many
+    slow steps and is never abandoned.
     """
-    starts = plane_cylinder_starts(problem)
-    if starts:
-        return starts, len(starts), "closed"
-    point_groups = [g for g in problem.groups if g.points is not None]
-    centres = sphere_centre_candidates(point_groups)
-    rotations = []
+
+    poses: list
+    blocks: int = 1
+    swept: bool = False
+    far: bool = False
+
+
+def plane_and_cylinder(problem, centres):
+    """Closed form: the paper's Example Two steps (:func:`plane_cylinder_starts`)."""
+    poses = plane_cylinder_starts(problem)
+    return Starts(poses, len(poses)) if poses else None
+
+
+def sweep_about_a_plane_normal(problem, centres):
+    """A plane's measured normal fixes two rotations: sweep the third, either sign of the normal."""
     for n_fix, n_meas in _plane_directions(problem):
+        rotations = []
         for sign in (1.0, -1.0):
             R0 = rotation_aligning(n_fix, sign * n_meas)
-            for k in range(SWEEP_STEPS):
-                angle = 2.0 * np.pi * k / SWEEP_STEPS
-                rotations.append(rotation_from_vector(angle * n_meas) @ R0)
-        break
-    if len(centres) >= 3 and not rotations:
-        # Closed form: Kabsch on three or more sphere centres, one start per candidate set.
-        fixed = np.array([f for f, _ in centres])
-        starts = []
-        for combo in combinations([m for _, m in centres]):
-            R, t = kabsch(fixed, np.array(combo))
-            if R is not None:
-                starts.append((R, t))
-        if starts:
-            return starts, len(starts), "closed"
-    if len(centres) >= 2 and not rotations:
-        # The line through two sphere centres fixes a direction: sweep about it.
-        (f1, m1), (f2, m2) = centres[:2]
-        for c1 in m1:
-            for c2 in m2:
-                axis = (c2 - c1) / max(np.linalg.norm(c2 - c1), 1e-12)
-                R0 = rotation_aligning(f2 - f1, axis)
-                for k in range(SWEEP_STEPS):
-                    rotations.append(rotation_from_vector(2.0 * np.pi * k / SWEEP_STEPS * axis) @ R0)
-    mode = "sweep" if rotations else "random"
-    if not rotations:
-        rng = np.random.default_rng(0)
-        rotations = [random_rotation(rng) for _ in range(FALLBACK_STARTS)]
+            rotations += [rotation_from_vector(2.0 * np.pi * k / SWEEP_STEPS * n_meas) @ R0 for k in range(SWEEP_STEPS)]
+        return _translated(problem, rotations, centres, swept=True)
+    return None
+
+
+def kabsch_on_sphere_centres(problem, centres):
+    """Closed form: Kabsch on three or more sphere centres, one start per set of candidate centres."""
+    if len(centres) < 3:
+        return None
+    fixed = np.array([f for f, _ in centres])
+    poses = [pose for pose in (kabsch(fixed, np.array(c)) for c in combinations([m for _, m in centres]))
+             if pose[0] is not None]
+    return Starts(poses, len(poses)) if poses else None
+
+
+def sweep_about_two_sphere_centres(problem, centres):
+    """The line through two sphere centres fixes two rotations: sweep about it."""
+    if len(centres) < 2:
+        return None
+    (f1, m1), (f2, m2) = centres[:2]
+    rotations = []
+    for c1 in m1:
+        for c2 in m2:
+            axis = (c2 - c1) / max(np.linalg.norm(c2 - c1), 1e-12)
+            R0 = rotation_aligning(f2 - f1, axis)
+            rotations += [rotation_from_vector(2.0 * np.pi * k / SWEEP_STEPS * axis) @ R0 for k in range(SWEEP_STEPS)]
+    return _translated(problem, rotations, centres, swept=True)
+
+
+def random_rotations(problem, centres):
+    """Nothing fixes a direction: seeded random rotations."""
+    rng = np.random.default_rng(0)
+    return _translated(problem, [random_rotation(rng) for _ in range(FALLBACK_STARTS)], centres, far=True)
+
+
+# The start strategies, first that applies wins: one entry per kind of fixture.
+STRATEGIES = (plane_and_cylinder, sweep_about_a_plane_normal, kabsch_on_sphere_centres,
+              sweep_about_two_sphere_centres, random_rotations)
+
+
+def initial_poses(problem) -> Starts:
+    """Starting poses without a nominal pose: the first strategy of ``STRATEGIES`` that applies."""
+    centres = sphere_centre_candidates([g for g in problem.groups if g.points is not None])
+    return next(starts for starts in (strategy(problem, centres) for strategy in STRATEGIES) if starts is not None)
+
+
+def _translated(problem, rotations, centres, swept=False, far=False):
+    """Rotations with their translations: from each candidate centre of a sphere, else from the mean touch."""
+    if centres:
+        f, ms = centres[0]
+        return Starts([(R, m - R @ f) for m in ms for R in rotations], len(ms), swept, far)
+    point_groups = [g for g in problem.groups if g.points is not None]
     if point_groups:
         measured = np.concatenate([g.points for g in point_groups]).mean(axis=0)
         anchors = np.concatenate([np.tile(_anchor(g.feature), (g.count, 1)) for g in point_groups]).mean(axis=0)
     else:
         measured = anchors = np.zeros(3)
-    if centres:
-        # Translation in closed form from each candidate centre of a sphere.
-        f, ms = centres[0]
-        return [(R, m - R @ f) for m in ms for R in rotations], len(ms), mode
-    return [(R, measured - R @ anchors) for R in rotations], 1, mode
-
+    return Starts([(R, measured - R @ anchors) for R in rotations], 1, swept, far)
 
 
 def plane_cylinder_starts(problem, steps=PLANE_CYLINDER_STEPS, keep=4):
@@ -234,18 +258,17 @@ def plane_cylinder_starts(problem, steps=PLANE_CYLINDER_STEPS, keep=4):
     return starts
 
 
-
-def best_starts(problem, starts, blocks, mode):
+def best_starts(problem, starts: Starts):
     """Solve each start's translation (batched Gauss-Newton) and order the starts.
 
-    Returns (starts, first): the ``first`` ones are those to refine in any
+    Returns (poses, first): the ``first`` ones are those to refine in any
     case: in sweeps, every start whose cost is no higher than its two
     neighbours; otherwise the best few of each block. The rest follow by cost.
     """
-    if not starts:
-        return [], 0, mode
-    Rs = np.array([R for R, _ in starts])
-    ts = np.array([t for _, t in starts], dtype=float)
+    if not starts.poses:
+        return [], 0
+    Rs = np.array([R for R, _ in starts.poses])
+    ts = np.array([t for _, t in starts.poses], dtype=float)
     for _ in range(2):
         r, J = problem.evaluate_batch(Rs, ts)
         Jv = J[:, :, 3:]
@@ -256,14 +279,14 @@ def best_starts(problem, starts, blocks, mode):
     predicted = r + np.einsum("kmi,ki->km", Jv, v)
     cost = np.sum(predicted**2, axis=1)
     order = np.argsort(cost)
-    if mode == "sweep":
+    if starts.swept:
         sweep = cost.reshape(-1, SWEEP_STEPS)
         minima = (sweep <= np.roll(sweep, 1, axis=1)) & (sweep <= np.roll(sweep, -1, axis=1))
         chosen = [k for k in order if minima.reshape(-1)[k]]
     else:
-        size = len(starts) // blocks
-        block = np.arange(len(starts)) // size
+        size = len(starts.poses) // starts.blocks
+        block = np.arange(len(starts.poses)) // size
         chosen = [k for k in order if np.sum(block[order[: list(order).index(k)]] == block[k]) < UNSWEPT_PER_BLOCK]
     picked = set(chosen)
     ordered = chosen + [k for k in order if k not in picked]
-    return [(Rs[k], ts[k]) for k in ordered], len(chosen), mode
+    return [(Rs[k], ts[k]) for k in ordered], len(chosen)

@@ -45,7 +45,6 @@ def plan_touches(entries, fixture2meas):
     return {key: np.array(value) for key, value in touches.items()}, contacts
 
 
-
 def perturb_touches(touches, contacts, rng, sigma_mm, lever_mm=SENSOR_LEVER_MM):
     """Touches as made by sensors placed with the noise model's random rigid errors.
 

@@ -212,7 +212,6 @@ def random_coordinates(mode_set: Modes, zone_mm, rng):
     return rng.uniform(-a, a)
 
 
-
 def departure_mm(nominal, actual):
     """The largest distance (mm) of the actual surface from the nominal one over the nominal patch."""
     from .patches import patch_points

@@ -41,7 +41,6 @@ class TouchGroup:
         return len(self.index)
 
 
-
 def fixture_side(feature, fixed: bool, **extra):
     """The contact-model side of a feature in the fixture frame (a point is always fixed, at itself)."""
     el = element(feature.kind)
@@ -49,7 +48,6 @@ def fixture_side(feature, fixed: bool, **extra):
     if el.letter == "P":
         fixed, geometry["o"] = True, feature.point
     return make_side(el.letter, fixed, **geometry, **extra)
-
 
 
 def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
@@ -71,7 +69,6 @@ def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
         feature, ctype, sensor, fixture_side(feature, fixture_fixed), np.full(n, float(rho)),
         np.asarray(index), points, centre=points,
     )
-
 
 
 def sensor_geometry(ctype, sensor, contact_point=None):
@@ -100,7 +97,6 @@ def sensor_geometry(ctype, sensor, contact_point=None):
     return geometry
 
 
-
 def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fixture=None,
                   contact_point=None) -> TouchGroup:
     """One touch of any contact type: the sensor element's geometry in the measurement frame.
@@ -127,7 +123,6 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
         rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(getattr(feature, "radius", 0.0))
     centre = placement_centre(ctype.sensor, geometry, None if contact_point is None else np.reshape(contact_point, (1, 3)))
     return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre)
-
 
 
 def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=None):

@@ -27,7 +27,6 @@ def covariance(jacobian, translation, sigma):
     return A @ C @ A.T
 
 
-
 def cramer_rao_bound(problem, fixture2meas, sigma):
     """Cramer-Rao bound (6, 6) of the pose under the sensor noise model with placement noise sigma (mm).
 
@@ -37,7 +36,6 @@ def cramer_rao_bound(problem, fixture2meas, sigma):
     T = check_fixture2meas(fixture2meas)
     _, J = problem.evaluate(T[:3, :3], T[:3, 3])
     return covariance(J, T[:3, 3], sigma)
-
 
 
 def sigmas(cov):

@@ -17,15 +17,10 @@ from .mobility import matrix_rank
 from .pose import fixture2meas_from_rt, rotation_angle, skew
 
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
-
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
-
 EXTENT_SIGMAS = 3.0  # ... plus this many standard deviations of the touch's position under the pose
-
 SAME_POSE_ROTATION_RAD = 1e-4
-
 SAME_POSE_TRANSLATION_MM = 1e-3
-
 
 
 def same_pose(a, b):
@@ -33,7 +28,6 @@ def same_pose(a, b):
         rotation_angle(a[0] @ b[0].T) < SAME_POSE_ROTATION_RAD
         and np.linalg.norm(a[1] - b[1]) < SAME_POSE_TRANSLATION_MM
     )
-
 
 
 @dataclass
@@ -60,17 +54,14 @@ class Solution:
         return float(np.sqrt(np.mean(self.residuals**2))) if len(self.residuals) else 0.0
 
 
-
 def chi_square_quantile(probability, dof):
     """The chi-square quantile (scipy.stats.chi2.ppf without importing scipy.stats)."""
     return 2.0 * float(gammaincinv(0.5 * dof, probability))
 
 
-
 def chi_square_passes(cost, rows, rank, sigma):
     dof = max(rows - rank, 1)
     return cost / sigma**2 <= chi_square_quantile(CHI2_CONFIDENCE, dof)
-
 
 
 def inadmissible(problem, rotation, translation, jacobian=None, tolerance=EXTENT_TOLERANCE_MM):
@@ -108,7 +99,6 @@ def inadmissible(problem, rotation, translation, jacobian=None, tolerance=EXTENT
             away = np.einsum("ij,ij->i", outward, g.approach) > 0.0
             bad.update(int(i) for i in g.index[away & np.all(np.isfinite(g.approach), axis=1)])
     return sorted(bad)
-
 
 
 def judged(problem, candidate, length):
