@@ -1,4 +1,13 @@
-"""Names of the motions a set of touches leaves free, relative to the fixture's features.
+"""Names of free motions in standard form, relative to named geometry.
+
+One algorithm for the catalogue's analysis and for a registration left
+underdetermined: the free twists are covered, greatest first, by the
+displacement subgroups the named points, lines and planes span, spherical
+motion {S_o} about a point, planar motion {G_P} in a plane, cylindrical
+motion {C_u} along a line, translation {T_P} in a plane, rotation {R_u}
+about a line, translation {T_u} along a direction; what no named geometry
+explains is given as screws with their pitch (0 is a rotation, never called
+a screw) or as translations, in the coordinates the twists are given in.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
@@ -6,122 +15,132 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
-def _feature_directions(problem, rotation, features=None):
-    """(description, unit direction in the measurement frame, feature): touched features first."""
+from .elements import perpendicular_basis
+from .mobility import matrix_rank, null_space
+
+COLLINEAR_MM = 1e-6  # touches this close to the line through the first and last lie on it
+
+
+def _rotation(p, d):
+    return np.concatenate([d, np.cross(p, d)])
+
+
+def _translation(d):
+    return np.concatenate([np.zeros(3), d])
+
+
+def _candidates(points, lines, planes):
+    """(words, algebra (k, 6)) of the subgroups the named geometry spans, greatest first."""
     out = []
-    seen = set()
-    listed = [g.feature for g in problem.groups] + list((features or {}).values())
-    for f in listed:
-        if f is None or f.id in seen:
-            continue
-        seen.add(f.id)
-        if f.kind == "plane":
-            out.append((f"the normal of {f.id}", rotation @ f.normal, f))
-        elif f.kind == "cylinder":
-            out.append((f"the axis of {f.id}", rotation @ f.axis, f))
-        elif f.kind == "line":
-            out.append((f"the direction of {f.id}", rotation @ f.direction, f))
-    return out
+    for name, p in points.items():
+        out.append((3, f"spherical motion {{S_o}} about {name}", [_rotation(p, e) for e in np.eye(3)]))
+    for name, (p, n) in planes.items():
+        e1, e2 = perpendicular_basis(n)
+        out.append((3, f"planar motion {{G_P}} in the plane of {name}", [_rotation(p, n), _translation(e1), _translation(e2)]))
+        out.append((2, f"translation {{T_P}} in the plane of {name}", [_translation(e1), _translation(e2)]))
+    for name, (p, d) in lines.items():
+        out.append((2, f"cylindrical motion {{C_u}} along {name}", [_rotation(p, d), _translation(d)]))
+        out.append((1, f"rotation {{R_u}} about {name}", [_rotation(p, d)]))
+    for name, (p, n) in planes.items():
+        out.append((1, f"translation {{T_u}} along the normal of {name}", [_translation(n)]))
+    for name, (p, d) in lines.items():
+        out.append((1, f"translation {{T_u}} along {name}", [_translation(d)]))
+    for axis, label in zip(np.eye(3), "xyz"):
+        out.append((1, f"translation {{T_u}} along {label}", [_translation(axis)]))
+    out.sort(key=lambda item: -item[0])  # stable: within a dimension, the order above
+    return [(words, np.array(algebra)) for _, words, algebra in out]
 
 
-def _vec(v):
-    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+def _vec(v, digits=3):
+    """Coordinates in words, rounding off what is zero but for rounding (no -0)."""
+    v = np.where(np.abs(v) < 1e-9 * max(np.abs(v).max(), 1.0), 0.0, v) + 0.0
+    return "(" + ", ".join(f"{x:.{digits}g}" for x in v) + ")"
+
+
+def screw_words(twist) -> str:
+    """A twist in words: a translation, a rotation (pitch 0) or a screw with its pitch (mm/rad)."""
+    w, v = twist[:3], twist[3:]
+    if np.linalg.norm(w) < 1e-9 * max(np.linalg.norm(v), 1e-300):
+        return f"translation {{T_u}} along {_vec(v / np.linalg.norm(v))}"
+    pitch = float(w @ v / (w @ w))
+    point = np.cross(w, v) / (w @ w)
+    d = w / np.linalg.norm(w)
+    if abs(pitch) < 1e-9:
+        return f"rotation {{R_u}} about the axis through {_vec(point, 4)} mm along {_vec(d)}"
+    return f"screw motion of pitch {pitch:.4g} mm/rad about the axis through {_vec(point, 4)} mm along {_vec(d)}"
+
+
+def free_motion_names(free, points=None, lines=None, planes=None, length_mm=None) -> list:
+    """Names of the motions spanned by the free twists (m, 6), relative to named geometry.
+
+    ``points`` {name: (3,)}, ``lines`` {name: (point (3,), unit direction (3,))},
+    ``planes`` {name: (point (3,), unit normal (3,))}, in the twists' frame.
+    ``length_mm`` balances rotation and translation in the rank tests.
+    """
+    free = np.asarray(free, float).reshape(-1, 6)
+    dim = len(free)
+    words, covered = [], np.zeros((0, 6))
+    candidates = _candidates(points or {}, lines or {}, planes or {})
+    # First the subgroups that add all of their motions, then those that add some.
+    for whole in (True, False):
+        for text, algebra in candidates:
+            if len(covered) == dim or text in words:
+                continue
+            inside = matrix_rank(np.vstack([free, algebra]), length_mm) == dim
+            added = matrix_rank(np.vstack([covered, algebra]), length_mm) - len(covered)
+            if inside and added > 0 and (added == len(algebra) or not whole):
+                words.append(text)
+                covered = np.vstack([covered, algebra])
+                covered = np.linalg.svd(covered, full_matrices=False)[2][: matrix_rank(covered, length_mm)]
+    if len(covered) < dim:
+        # What the named geometry does not explain: the screws of the twists left.
+        remaining = free - (free @ covered.T) @ covered if len(covered) else free
+        for twist in np.linalg.svd(remaining, full_matrices=False)[2][: dim - len(covered)]:
+            words.append(screw_words(twist))
+    return words
 
 
 def free_motions(problem, solution, features=None):
-    """Names of the motions the touches do not constrain, relative to the features.
+    """Names of the motions the touches leave free, relative to the fixture's features, fixture frame.
 
-    Directions are matched with the touched features first, then with the
-    other ``features`` (dict id -> feature) of the fixture.
+    Named geometry: every feature (a plane, a sphere's centre, a cylinder's
+    axis, a line), the lines through touches that lie on one, and the lines
+    through two sphere centres.
     """
     length = problem.scale()
-    D = np.array([length] * 3 + [1.0] * 3)
-    scaled = solution.jacobian / D
-    _, s, vt = np.linalg.svd(scaled, full_matrices=True)
-    rank = solution.rank
-    null = (vt[rank:] / D).T  # (6, k) twists
-    if null.shape[1] == 0:
+    free = null_space(solution.jacobian, length)
+    if not len(free):
         return []
+    # Measurement-frame twists (w, v) seen in the fixture frame: (R^T w, R^T (v + w x t)).
     R, t = solution.rotation, solution.translation
-    directions = _feature_directions(problem, R, features)
-    names = []
-    # Pure translations: the null space of the rotation part within the null space.
-    _, sw, vw = np.linalg.svd(null[:3], full_matrices=True)
-    rank_w = int(np.sum(sw > 1e-9 * max(np.abs(null).max(), 1e-300)))
-    trans = null @ vw[rank_w:].T  # (6, k - rank_w)
-    rot = null @ vw[:rank_w].T
-    if trans.shape[1]:
-        T_dirs = np.linalg.qr(trans[3:])[0]
-        if T_dirs.shape[1] == 1:
-            u = T_dirs[:, 0]
-            match = [name for name, d, _ in directions if abs(d @ u) > 0.999]
-            planes = [(f.id, d) for _, d, f in directions if f.kind == "plane"]
-            match += [f"both {a} and {b}" for i, (a, da) in enumerate(planes) for b, db in planes[i + 1:]
-                      if abs(da @ u) < 1e-3 and abs(db @ u) < 1e-3 and abs(da @ db) < 0.999]
-            if match and match[0].startswith("both "):
-                names.append("translation parallel to " + match[0])
-            else:
-                names.append("translation along " + (match[0] if match else _vec(u)))
-        elif T_dirs.shape[1] == 2:
-            n = np.cross(T_dirs[:, 0], T_dirs[:, 1])
-            match = [f.id for name, d, f in directions if f.kind == "plane" and abs(d @ n) > 0.999]
-            names.append("translation in the plane of " + match[0] if match else f"translation normal to {_vec(n)}")
+    free = np.hstack([free[:, :3] @ R, (free[:, 3:] + np.cross(free[:, :3], t)) @ R])
+    points, lines, planes, touch_lines = {}, {}, {}, {}
+    for g in problem.groups:
+        if g.points is not None and g.count >= 2:
+            local = (g.points - t) @ R
+            d = (local[-1] - local[0]) / np.linalg.norm(local[-1] - local[0])
+            off = local - local[0] - np.outer((local - local[0]) @ d, d)
+            if np.all(np.linalg.norm(off, axis=1) < COLLINEAR_MM * max(length, 1.0)):
+                touch_lines[f"the line through the touches on {g.feature.id}"] = (local[0], d)
+    listed = {g.feature.id: g.feature for g in problem.groups}
+    listed.update(features or {})
+    spheres = [f for f in listed.values() if f.kind == "sphere"]
+    for i, a in enumerate(spheres):
+        for b in spheres[i + 1:]:
+            lines[f"the line through the centres of {a.id} and {b.id}"] = (
+                a.center, (b.center - a.center) / np.linalg.norm(b.center - a.center))
+    for f in listed.values():
+        if f.kind == "plane":
+            planes[f.id] = (f.point, f.normal)
+        elif f.kind == "sphere":
+            points[f"the centre of {f.id}"] = f.center
+        elif f.kind == "cylinder":
+            lines[f"the axis of {f.id}"] = (f.point, f.axis)
+        elif f.kind == "line":
+            lines[f.id] = (f.point, f.direction)
         else:
-            names.append("translation in every direction")
-    if rot.shape[1]:
-        omega_basis = np.linalg.qr(rot[:3])[0]
-        shifts = trans[3:] if trans.shape[1] else np.zeros((3, 0))
-
-        def twist_with(w):
-            """The free twist whose rotation part is ``w`` and the axis point (m, 3)."""
-            coeff = np.linalg.lstsq(null[:3], w, rcond=None)[0]
-            v = null[3:] @ coeff
-            return np.cross(w, v) / (w @ w)
-
-        def on_axis(points, w):
-            """Whether the points lie on the free axis along w (shifted by free translations)."""
-            off = points - twist_with(w)
-            off = off - np.outer(off @ w, w)
-            moves = np.cross(w, shifts.T).T if shifts.shape[1] else np.zeros((3, 0))
-            if moves.shape[1]:
-                q = np.linalg.qr(moves)[0]
-                off = off - (off @ q) @ q.T
-            return bool(np.all(np.linalg.norm(off, axis=1) < 1e-6 * length))
-
-        def take(w):
-            nonlocal omega_basis
-            if omega_basis.shape[1] == 0 or np.linalg.norm(omega_basis @ (omega_basis.T @ w) - w) > 1e-6:
-                return False
-            rest = omega_basis - np.outer(w, w @ omega_basis)
-            q, sv, _ = np.linalg.svd(rest, full_matrices=False)
-            omega_basis = q[:, sv > 1e-6]
-            return True
-
-        # Axes through collinear touches, then feature directions, then anything left.
-        for g in problem.groups:
-            if g.points is None or g.count < 2:
-                continue
-            d = g.points[-1] - g.points[0]
-            d = d / np.linalg.norm(d)
-            if on_axis(g.points, d) and take(d):
-                names.append(f"rotation about the line through the touches on {g.feature.id}")
-        for name, d, f in directions:
-            if take(d):
-                names.append("rotation about " + name)
-        for k in range(omega_basis.shape[1]):
-            w = omega_basis[:, k]
-            label = None
-            spheres = [g.feature for g in problem.groups if getattr(g.feature, "kind", None) == "sphere"]
-            for i, a in enumerate(spheres):
-                for b in spheres[i + 1:]:
-                    centres = np.array([R @ a.center + t, R @ b.center + t])
-                    if label is None and on_axis(centres, w):
-                        label = f"the line through the centres of {a.id} and {b.id}"
-            for g in problem.groups if label is None else ():
-                if getattr(g.feature, "kind", None) == "sphere":
-                    c = R @ g.feature.center + t
-                    if on_axis(c[None], w):
-                        label = f"an axis {_vec(w)} through the centre of {g.feature.id}"
-                        break
-            names.append("rotation about " + (label or f"the axis {_vec(w)} through {_vec(twist_with(w))} mm"))
-    return names
+            points[f.id] = f.point
+    # The features' own lines before those through touches or centres.
+    return free_motion_names(free, points, {**{k: v for k, v in lines.items() if not k.startswith("the line")},
+                                            **{k: v for k, v in lines.items() if k.startswith("the line")},
+                                            **touch_lines}, planes, length)

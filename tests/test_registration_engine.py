@@ -287,10 +287,8 @@ def test_three_collinear_touches_on_a_plane_are_underdetermined():
     assert result["status"] == "underdetermined"
     assert result["covariance"] is None
     motions = result["free_motions"]
-    assert "translation in the plane of top" in motions
-    assert "rotation about the normal of top" in motions
-    assert "rotation about the line through the touches on top" in motions
-    assert len(motions) == 3
+    assert motions == ["planar motion {G_P} in the plane of top",
+                       "rotation {R_u} about the line through the touches on top"]
 
 
 def test_collinear_touches_in_a_full_plan_name_the_missing_rotation():
@@ -304,7 +302,9 @@ def test_collinear_touches_in_a_full_plan_name_the_missing_rotation():
     assert result["rank"] == 5
     # The rotation that tilts top about the touch line, with front and left still touching.
     assert len(result["free_motions"]) == 1
-    assert result["free_motions"][0].startswith("rotation about ")
+    # A rotation (pitch 0) about an axis along the touch line, in the fixture frame.
+    assert result["free_motions"][0].startswith("rotation {R_u} about the axis through")
+    assert result["free_motions"][0].endswith(("mm along (-1, 0, 0)", "mm along (1, 0, 0)"))
 
 
 def test_a_touch_labelled_with_the_wrong_feature_is_flagged():
@@ -422,11 +422,11 @@ def test_the_paper_plane_and_cylinder_steps_start_next_to_the_pose():
     "name,plan,left_out,motions",
     [
         ("inclined-plane-cylinder", "default", ["plane"],
-         ["translation along the axis of cylinder", "rotation about the axis of cylinder"]),
+         ["cylindrical motion {C_u} along the axis of cylinder"]),
         ("quarter-sphere", "point-probe", ["flat_b", "sphere"],
-         ["translation in the plane of flat_a", "rotation about the normal of flat_a"]),
-        ("sphere-plate", "default", ["ball_3"], ["rotation about the line through the centres of ball_1 and ball_2"]),
-        ("cube", "default", ["left"], ["translation along the normal of left"]),
+         ["planar motion {G_P} in the plane of flat_a"]),
+        ("sphere-plate", "default", ["ball_3"], ["rotation {R_u} about the line through the centres of ball_1 and ball_2"]),
+        ("cube", "default", ["left"], ["translation {T_u} along the normal of left"]),
     ],
 )
 def test_free_motions_are_named_after_the_features(name, plan, left_out, motions):

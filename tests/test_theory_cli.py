@@ -49,7 +49,7 @@ def test_analyze_example_one():
 def test_analyze_names_the_remaining_freedom():
     doc = json.loads(run("analyze", "S/F-S/F", "--format", "json").stdout)
     assert doc["mobility"] == 1
-    assert doc["freedom"] == ["rotation about the line through the sensor sphere centre and the fixture sphere centre"]
+    assert doc["freedom"] == ["rotation {R_u} about the line through the sensor sphere centre and the fixture sphere centre"]
     doc = json.loads(run("analyze", "P/F-S/M", "P/F-S/M", "P/F-S/M", "PL/F-PL/F", "--format", "json").stdout)
     assert (doc["class"], doc["mobility"], doc["redundant"], doc["in_catalog"]) == (
         "{G3}{S-S}{S-S}{S-S}", 0, [], True)

@@ -12,7 +12,7 @@ import numpy as np
 from fixturecad.theory.catalogue import CLASSES, lookup
 from fixturecad.theory.enumeration import SEARCH_SEED, class_wrenches, locates_minimally
 from fixturecad.registration.mobility import matrix_rank, null_space
-from fixturecad.theory.groups import Subgroup
+from fixturecad.registration.motions import free_motion_names
 from fixturecad.theory.instances import generic_instance, named_entities
 
 ANALYSIS_SEED = 8
@@ -75,44 +75,6 @@ def analyze(names: list[str]) -> Analysis:
 
 
 def describe_freedom(wrenches: np.ndarray, instances) -> list[str]:
-    """Name the free motions left by stacked constraint rows, shape (k, 6)."""
-    free = null_space(wrenches)
-    dim = len(free)
-    within = lambda group: matrix_rank(np.vstack([free, group.algebra()])) == dim
+    """Name the free motions left by stacked constraint rows, shape (k, 6), after the contacts' geometry."""
     points, lines = named_entities(instances)
-    candidates = [(f"spherical motion about {name}", Subgroup("S", p, np.zeros(3))) for name, p in points.items()]
-    for name, (p, d) in lines.items():
-        candidates += [
-            (f"cylindrical motion along {name}", Subgroup("C", p, d)),
-            (f"rotation about {name}", Subgroup("R", p, d)),
-            (f"translation along {name}", Subgroup("T1", p, d)),
-        ]
-    for axis, label in zip(np.eye(3), "xyz"):
-        candidates.append((f"translation along {label}", Subgroup("T1", np.zeros(3), axis)))
-    words, covered = [], np.zeros((0, 6))
-    for text, group in candidates:
-        if within(group) and matrix_rank(np.vstack([covered, group.algebra()])) > len(covered):
-            words.append(text)
-            covered = np.vstack([covered, group.algebra()])
-            covered = np.linalg.svd(covered, full_matrices=False)[2][: matrix_rank(covered)]
-        if len(covered) == dim:
-            return words
-    # What the named geometry cannot explain: give the screws of the remaining twists.
-    remaining = free - (free @ covered.T) @ covered if len(covered) else free
-    for twist in np.linalg.svd(remaining, full_matrices=False)[2][: dim - len(covered)]:
-        words.append(_screw_words(twist))
-    return words
-
-
-def _screw_words(twist) -> str:
-    w, v = twist[:3], twist[3:]
-    if np.linalg.norm(w) < 1e-9:
-        d = v / np.linalg.norm(v)
-        return f"translation along ({d[0]:.3f}, {d[1]:.3f}, {d[2]:.3f})"
-    pitch = w @ v / (w @ w)
-    point = np.cross(w, v) / (w @ w)
-    d = w / np.linalg.norm(w)
-    return (
-        f"screw motion of pitch {pitch:.3f} mm/rad about the axis through "
-        f"({point[0]:.1f}, {point[1]:.1f}, {point[2]:.1f}) mm along ({d[0]:.3f}, {d[1]:.3f}, {d[2]:.3f})"
-    )
+    return free_motion_names(null_space(wrenches), points, lines)
