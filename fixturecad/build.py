@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from fixturecad import features_json
 from fixturecad.errors import InputError
-from fixturecad.registration.tolerance import DEFAULT_ZONE_MM
+from fixturecad.registration.defaults import DEFAULT_ZONE_MM
 
 if TYPE_CHECKING:
     from fixturecad.templates.base import Template

@@ -12,7 +12,7 @@ from typing import Annotated
 import typer
 
 from fixturecad.build import DEFAULT_STL_TOLERANCE_MM, STL_TOLERANCE_RANGE_MM
-from fixturecad.registration.tolerance import DEFAULT_ZONE_MM
+from fixturecad.registration.defaults import DEFAULT_ZONE_MM
 from fixturecad.errors import InputError
 from fixturecad.output import Format, render
 

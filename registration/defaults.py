@@ -1,4 +1,5 @@
-"""The sensor noise model's defaults, in one place (no imports: the command line reads them at start)."""
+"""Defaults of the noise models, in one place (no imports: the command line reads them at start)."""
 
 DEFAULT_SIGMA_MM = 0.005  # sensor placement noise, each axis: a touch probe's repeatability
 SENSOR_LEVER_MM = 20.0  # sensor size: plane, line and fixed-surface sensors tilt by sigma / lever rad
+DEFAULT_ZONE_MM = 0.1  # manufacturing tolerance of a good FDM print: every sensing point within +-0.05 mm

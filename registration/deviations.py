@@ -16,8 +16,8 @@ inlined into the generated standalone ``register.py``.
 import numpy as np
 
 from .datums import frame_change
-from .pose import vector_from_rotation
-from .tolerance import coordinates, deviated, modes, motion_from_twist, moved, random_coordinates
+from .pose import motion_from_twist, vector_from_rotation
+from .tolerance import coordinates, deviated, modes, moved, random_coordinates
 
 STEP = 1e-6  # finite-difference step of the linearised datum and mode maps (mm, rad)
 FREED_ZONE_MM = 20.0  # the zone of a feature let free: far beyond any print, within linearity

@@ -26,6 +26,15 @@ def matrix_rank(matrix, length_mm=None) -> int:
     return int(np.sum(s > RANK_TOLERANCE * max(s[0], 1e-300)))
 
 
+def matrix_ranks(stack) -> np.ndarray:
+    """Ranks (b,) of a stack of row sets (b, k, n) at once, with the same tolerance (zero rows pad)."""
+    stack = np.asarray(stack, float)
+    if stack.shape[1] == 0:
+        return np.zeros(len(stack), int)
+    s = np.linalg.svd(stack, compute_uv=False)
+    return np.sum(s > RANK_TOLERANCE * np.maximum(s[:, :1], 1e-300), axis=1)
+
+
 def null_space(matrix, length_mm=None) -> np.ndarray:
     """Vectors (m, n) the rows (k, n) leave free (twists, for n = 6), orthonormal in the scaled coordinates."""
     matrix = np.asarray(matrix, float)

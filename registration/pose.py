@@ -84,6 +84,18 @@ def rt_from_fixture2meas(fixture2meas):
     return T[:3, :3].copy(), T[:3, 3].copy()
 
 
+def motion_from_twist(twist):
+    """The rigid motion (R, t) ``exp`` of a twist (omega rad, v mm): ``x -> R x + t``."""
+    omega, v = np.asarray(twist[:3], float), np.asarray(twist[3:], float)
+    theta = np.linalg.norm(omega)
+    W = skew(omega)
+    if theta < 1e-9:
+        V = np.eye(3) + 0.5 * W
+    else:
+        V = np.eye(3) + (1 - np.cos(theta)) / theta**2 * W + (theta - np.sin(theta)) / theta**3 * (W @ W)
+    return rotation_from_vector(omega), V @ v
+
+
 def apply_twist(rotation, translation, twist):
     """Move a pose by a spatial twist (omega, v): ``R <- exp(omega) R``, ``t <- exp(omega) t + v``."""
     E = rotation_from_vector(twist[:3])

@@ -33,9 +33,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .patches import patch_size
-from .pose import rotation_from_vector, skew, vector_from_rotation
+from .pose import motion_from_twist
 
-DEFAULT_ZONE_MM = 0.1  # a good FDM print: every sensing point within +-0.05 mm of the drawing
 # Each mode's share of the half zone (zone_mm / 2): position, orientation and size add up to 1.
 SHARES = {
     "plane": {"offset": 0.5, "tilt": 0.25},  # two tilts, a quarter each at the patch's reach
@@ -119,30 +118,6 @@ def modes(feature) -> Modes:
         return Modes(feature, ("x_mm", "y_mm", "z_mm"), feature.point, np.array([_shift(e) for e in np.eye(3)]),
                      np.zeros(3, bool), np.full(3, a))
     raise ValueError(f"unknown feature kind {kind!r}")
-
-
-def motion_from_twist(twist):
-    """The rigid motion (R, t) ``exp`` of a twist (omega rad, v mm): ``x -> R x + t``."""
-    omega, v = np.asarray(twist[:3], float), np.asarray(twist[3:], float)
-    theta = np.linalg.norm(omega)
-    W = skew(omega)
-    if theta < 1e-9:
-        V = np.eye(3) + 0.5 * W
-    else:
-        V = np.eye(3) + (1 - np.cos(theta)) / theta**2 * W + (theta - np.sin(theta)) / theta**3 * (W @ W)
-    return rotation_from_vector(omega), V @ v
-
-
-def twist_from_motion(rotation, translation):
-    """The twist (6,) whose exponential is the rigid motion ``x -> R x + t`` (inverse of :func:`motion_from_twist`)."""
-    omega = vector_from_rotation(rotation)
-    theta = np.linalg.norm(omega)
-    W = skew(omega)
-    if theta < 1e-9:
-        V_inv = np.eye(3) - 0.5 * W
-    else:
-        V_inv = np.eye(3) - 0.5 * W + (1 - theta * np.sin(theta) / (2 * (1 - np.cos(theta)))) / theta**2 * (W @ W)
-    return np.concatenate([omega, V_inv @ translation])
 
 
 def moved(feature, rotation, translation, radius_change_mm=0.0):

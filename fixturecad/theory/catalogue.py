@@ -8,7 +8,7 @@ the kinds of that product.
 """
 
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 
 import numpy as np
 
@@ -61,7 +61,7 @@ class CatalogueEntry:
     def name(self) -> str:
         return self.ctype.name
 
-    @property
+    @cached_property
     def contact_class(self) -> str:
         return class_name(list(self.chain))
 
@@ -174,10 +174,15 @@ def catalogue() -> tuple[CatalogueEntry, ...]:
 
 def classes() -> dict[str, list[CatalogueEntry]]:
     """Table IV: the contacts of each class, classes in the paper's order."""
+    return {name: list(entries) for name, entries in _classes().items()}
+
+
+@cache
+def _classes() -> dict[str, tuple]:
     grouped = {name: [] for name in CLASSES}
     for entry in catalogue():
         grouped[entry.contact_class].append(entry)
-    return grouped
+    return {name: tuple(entries) for name, entries in grouped.items()}
 
 
 def lookup(name: str) -> CatalogueEntry:

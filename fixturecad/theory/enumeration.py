@@ -12,12 +12,13 @@ a second, independent set of random instances.
 
 from collections import Counter
 from dataclasses import dataclass, field
+from functools import cache
 from math import comb
 
 import numpy as np
 
 from fixturecad.theory.catalogue import CLASSES, classes
-from fixturecad.registration.mobility import matrix_rank
+from fixturecad.registration.mobility import matrix_rank, matrix_ranks
 from fixturecad.theory.instances import generic_instance
 
 SEARCH_SEED = 579
@@ -113,11 +114,15 @@ def _orthonormal(rows):
 
 
 def _is_minimal(blocks, target_rank) -> bool:
+    """Whether leaving out any one block drops the rank below ``target_rank`` (one batched test)."""
+    if len(blocks) < 2:
+        return True
+    rows = sum(len(block) for block in blocks)
+    stack = np.zeros((len(blocks), rows, 6))
     for skip in range(len(blocks)):
-        rest = [block for i, block in enumerate(blocks) if i != skip]
-        if rest and matrix_rank(np.vstack(rest)) >= target_rank:
-            return False
-    return True
+        rest = np.vstack([block for i, block in enumerate(blocks) if i != skip])
+        stack[skip, : len(rest)] = rest
+    return bool(np.all(matrix_ranks(stack) < target_rank))
 
 
 def locates_minimally(members, wrenches, target_rank=6) -> bool:
@@ -158,10 +163,14 @@ def _search(names, wrenches, target_rank, max_contacts, progress=None):
     return found
 
 
+@cache
+def _class_dims() -> dict:
+    return {name: entries[0].dim for name, entries in classes().items()}
+
+
 def _shortcut_rank(members) -> int:
     """The paper's count: six minus freedom per member, less one per sharing pair."""
-    dims = {name: entries[0].dim for name, entries in classes().items()}
-    total = sum(6 - dims[m] for m in members)
+    total = sum(6 - _class_dims()[m] for m in members)
     sharing = sum(1 for m in members if m in SHORTCUT_SHARING)
     return total - sharing * (sharing - 1) // 2
 

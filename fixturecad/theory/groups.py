@@ -9,10 +9,10 @@ omega x x + v; a rotation about the axis through p along w is (w, p x w).
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 from fixturecad.registration.elements import perpendicular_basis
 from fixturecad.registration.mobility import matrix_rank, null_space
+from fixturecad.registration.pose import fixture2meas_from_rt, motion_from_twist, skew
 
 # Table II notation and degrees of freedom of each kind.
 NOTATION = {"R": "R_u", "T1": "T_u", "T2": "T_P", "C": "C_u", "G3": "G_P", "S": "S_o"}
@@ -60,22 +60,13 @@ class Subgroup:
     def sample(self, rng: np.random.Generator, scale=1.0) -> np.ndarray:
         """A random element as a 4x4 homogeneous matrix."""
         twist = rng.normal(scale=scale, size=DOF[self.kind]) @ self.algebra()
-        return expm(hat(twist))
-
-
-def hat(twist) -> np.ndarray:
-    """The 4x4 matrix of a twist (omega, v)."""
-    w, v = twist[:3], twist[3:]
-    out = np.zeros((4, 4))
-    out[:3, :3] = [[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]
-    out[:3, 3] = v
-    return out
+        return fixture2meas_from_rt(*motion_from_twist(twist))
 
 
 def adjoint(g) -> np.ndarray:
     """Adjoint of a 4x4 rigid motion acting on twists (omega, v)."""
     r, t = g[:3, :3], g[:3, 3]
-    that = hat(np.concatenate([t, np.zeros(3)]))[:3, :3]
+    that = skew(t)
     out = np.zeros((6, 6))
     out[:3, :3] = r
     out[3:, 3:] = r
