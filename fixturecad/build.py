@@ -69,7 +69,7 @@ def build(template: "Template", target: Path, force: bool = False,
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
     staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
-    side = SideProcess(staging)  # imports matplotlib and scipy while we import cadquery
+    side = SideProcess("preview", "register")  # imports matplotlib and scipy while we import cadquery
     try:
         _write_all(template, staging, stl_tolerance, fixture_tolerance, side)
         _move_into_place(staging, target)
@@ -101,8 +101,8 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
     document = features_document(template, stl_tolerance, fixture_tolerance)
     features_json.write(document, folder / FILES["features"])
     # the side process draws preview.png and writes register.py while we write STEP and STL
-    side.send(fixture_scene(template, features, matches, parts), folder / FILES["preview"],
-              folder / FILES["features"], folder / FILES["register"])
+    side.send(("preview", fixture_scene(template, features, matches, parts), folder / FILES["preview"]),
+              ("register", document, folder / FILES["register"]))
     export(shape, folder / FILES["step"])
     export(shape, folder / FILES["stl"], stl_tolerance, template.slug())
     side.wait()

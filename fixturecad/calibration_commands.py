@@ -9,6 +9,7 @@ import typer
 
 from fixturecad import features_json
 from fixturecad.errors import InputError
+from fixturecad.registration.defaults import DEFAULT_SIGMA_MM
 
 app = typer.Typer()
 
@@ -21,10 +22,21 @@ def calibrate(
     out_dir: Annotated[Path, typer.Argument(help="Fixture folder written by fixturecad build.")],
     measurements: Annotated[Path, typer.Argument(help="CSV feature,x,y,z: points measured on the printed part, mm, any frame.")],
     out: Annotated[Path | None, typer.Option(help="As-built folder to write (default: OUT_DIR-asbuilt).")] = None,
-    sigma: Annotated[float, typer.Option(help="Measurement noise standard deviation, mm (each axis).")] = 0.005,
+    sigma: Annotated[float, typer.Option(help="Measurement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
     force: Annotated[bool, typer.Option(help="Replace an as-built folder fixturecad wrote earlier.")] = False,
 ):
     """Fit the printed part's features to measured points; write an as-built fixture folder."""
+    from fixturecad.sideprocess import SideProcess
+
+    side = SideProcess("calibration", "register")  # ready on the second core while we fit
+    try:
+        _calibrate(Path(out_dir), Path(measurements), out, sigma, force, side)
+    except BaseException:
+        side.cancel()
+        raise
+
+
+def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool, side) -> None:
     import numpy as np
 
     from fixturecad.registration.calibration import calibrate as fit
@@ -32,7 +44,6 @@ def calibrate(
     from fixturecad.registration.features import features_from_json
     from fixturecad.registration.touchfile import read_touch_csv
 
-    out_dir = Path(out_dir)
     if not (sigma > 0 and np.isfinite(sigma)):
         raise InputError(f"--sigma must be a positive number of mm, got {sigma}")
     document = features_json.read(out_dir)
@@ -52,7 +63,7 @@ def calibrate(
     except ValueError as error:
         raise InputError(f"{measurements}: {str(error).splitlines()[0]}") from None
     as_built = _as_built_document(document, result, measurements, zone)
-    _write(out_dir, target, as_built, result, zone, force)
+    _write(out_dir, target, as_built, zone, force, side)
     typer.echo(format_report(as_built["calibration"], zone))
     typer.echo(f"as-built fixture: {target}")
 
@@ -104,9 +115,8 @@ def format_report(calibration: dict, zone_mm: float) -> str:
     return "\n".join(lines)
 
 
-def _write(out_dir: Path, target: Path, document: dict, result, zone_mm: float, force: bool) -> None:
-    from fixturecad.registration.generate import write_register_script
-
+def _write(out_dir: Path, target: Path, document: dict, zone_mm: float, force: bool, side) -> None:
+    """The as-built folder, written beside the target and moved into place when complete."""
     if target.exists() and not force:
         raise InputError(f"{target} already exists; pass --force to replace it")
     staging = target.with_name(f".{target.name}.calibrating")
@@ -117,43 +127,12 @@ def _write(out_dir: Path, target: Path, document: dict, result, zone_mm: float, 
             if (out_dir / name).is_file():
                 shutil.copy2(out_dir / name, staging / name)
         features_json.write(document, staging / features_json.NAME)
-        write_register_script(document, staging / "register.py")
-        plot_calibration(document, zone_mm, staging / REPORT_NAME)
+        side.send(("calibration", document, zone_mm, staging / REPORT_NAME), ("register", document, staging / "register.py"))
+        side.wait()
         if target.exists():
             shutil.rmtree(target)
         staging.rename(target)
     except BaseException:
+        side.cancel()
         shutil.rmtree(staging, ignore_errors=True)
         raise
-
-
-def plot_calibration(document: dict, zone_mm: float, path: Path) -> None:
-    """Each feature's largest departure from the drawing against the tolerance zone, a bar each."""
-    import numpy as np
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    calibration = document["calibration"]
-    datums = {entry["feature"]: entry["role"] for entry in document["datums"]["features"]}
-    names = list(calibration["features"])
-    entries = [calibration["features"][n] for n in names]
-    departure = np.array([e["departure_mm"] for e in entries]) * 1e3
-    fig = Figure(figsize=(7.5, 4.0), dpi=110)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
-    x = np.arange(len(names))
-    ax.bar(x, departure, color=["#2ca02c" if e["within_tolerance"] else "#d62728" for e in entries])
-    ax.axhline(zone_mm / 2 * 1e3, color="#444444", linestyle="--")
-    ax.text(-0.45, zone_mm / 2 * 1e3, f"tolerance +-{zone_mm / 2 * 1e3:g} um", ha="left", va="bottom",
-            color="#444444")
-    for k, (name, e) in enumerate(zip(names, entries)):
-        note = f"{departure[k]:.0f} um" + (f"\n{datums[name]} datum" if name in datums else "")
-        ax.text(k, departure[k], note, ha="center", va="bottom", fontsize=8)
-    labels = [f"{n}\n{e['points']} points, rms {e['rms_residual_mm'] * 1e3:.1f} um" for n, e in zip(names, entries)]
-    ax.set_xticks(x, labels, fontsize=8)
-    ax.set_ylabel("largest departure from the drawing, um")
-    ax.set_ylim(0, 1.3 * max(departure.max(), zone_mm / 2 * 1e3))
-    ax.set_title(f"as-built calibration from {Path(calibration['source']).name} (red: outside the tolerance)",
-                 fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path)

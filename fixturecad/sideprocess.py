@@ -1,34 +1,43 @@
-"""The build's side process: preview.png and register.py, off the CAD critical path.
+"""A side process: pictures and register.py, off the critical path, on the second core.
 
-``fixturecad build`` starts ``python -m fixturecad.sideprocess`` before it
-imports cadquery. The child imports matplotlib (and the register.py
-generator, which pulls in scipy) on the second core while the parent imports
-the CAD kernel and builds the solid; then the parent sends one job: a pickled
-preview scene and, once features.json is written, where register.py goes.
+A command that will draw (``build``'s preview.png, ``calibrate``'s
+calibration.png) starts ``python -m fixturecad.sideprocess`` first. The child
+imports matplotlib and the register.py generator (which pulls in scipy) while
+the parent does its own work (importing the CAD kernel, fitting); then the
+parent sends the jobs, by name, with their arguments.
 """
 
-import json
+import importlib
 import pickle
 import subprocess
 import sys
-from pathlib import Path
+
+# The jobs a parent may send: name -> (module, function).
+JOBS = {
+    "preview": ("fixturecad.preview", "render"),
+    "register": ("fixturecad.registration.generate", "write_register_script"),
+    "calibration": ("fixturecad.calibration_plot", "plot_calibration"),
+}
 
 
 class SideProcess:
-    """Parent end: start now, ``send`` the job later, ``wait`` for the files."""
+    """Parent end: start now naming the jobs to come, ``send`` them later, ``wait`` for them."""
 
-    def __init__(self, folder):
-        self.folder = Path(folder)
+    def __init__(self, *names):
+        unknown = [name for name in names if name not in JOBS]
+        if unknown:
+            raise ValueError(f"unknown side job {unknown[0]!r}; jobs are {', '.join(JOBS)}")
+        self.names = names
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "fixturecad.sideprocess"], stdin=subprocess.PIPE, stderr=subprocess.PIPE
+            [sys.executable, "-m", "fixturecad.sideprocess", *names], stdin=subprocess.PIPE, stderr=subprocess.PIPE
         )
 
-    def send(self, scene: dict, preview: Path, features: Path, register: Path) -> None:
-        """Draw ``scene`` into ``preview``; write ``register`` from the features.json at ``features``."""
-        scene_path = self.folder / ".scene.pickle"
-        scene_path.write_bytes(pickle.dumps(scene))
-        job = {"scene": str(scene_path), "preview": str(preview), "features": str(features), "register": str(register)}
-        self.process.stdin.write(json.dumps(job).encode() + b"\n")
+    def send(self, *jobs) -> None:
+        """Run ``(name, *arguments)`` jobs in the child, in order (names given at the start)."""
+        for job in jobs:
+            if job[0] not in self.names:
+                raise ValueError(f"side job {job[0]!r} was not named at the start")
+        self.process.stdin.write(pickle.dumps(jobs))
         self.process.stdin.close()
 
     def wait(self) -> None:
@@ -37,7 +46,7 @@ class SideProcess:
         self.process.wait()
         if self.process.returncode != 0:
             lines = error.decode(errors="replace").strip().splitlines()
-            raise RuntimeError(f"preview or register.py failed: {lines[-1] if lines else 'no message'}")
+            raise RuntimeError(f"side process failed: {lines[-1] if lines else 'no message'}")
 
     def cancel(self) -> None:
         if self.process.poll() is None:
@@ -46,41 +55,32 @@ class SideProcess:
         self.process.stderr.close()
 
 
-def _warm_imports() -> None:
-    import matplotlib
+def _warm(names) -> None:
+    """Import what the named jobs need; for a preview, a throw-away 3D drawing loads fonts and mplot3d."""
+    for name in names:
+        importlib.import_module(JOBS[name][0])
+    if "preview" in names:
+        import io
 
-    matplotlib.use("Agg")
-    import io
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    # a throw-away drawing loads fonts and the 3D machinery while the parent is busy
-    figure = Figure(figsize=(1, 1), dpi=20)
-    FigureCanvasAgg(figure)
-    axes = figure.add_subplot(projection="3d")
-    axes.text(0, 0, 0, "x", fontweight="bold")
-    axes.set_xlabel("x")
-    figure.savefig(io.BytesIO(), format="png")
-
-    import fixturecad.registration.generate  # noqa: F401  (warm: it pulls in scipy)
+        figure = Figure(figsize=(1, 1), dpi=20)
+        FigureCanvasAgg(figure)
+        axes = figure.add_subplot(projection="3d")
+        axes.text(0, 0, 0, "x", fontweight="bold")
+        axes.set_xlabel("x")
+        figure.savefig(io.BytesIO(), format="png")
 
 
 def _main() -> None:
-    _warm_imports()
-    line = sys.stdin.readline()
-    if not line.strip():
+    _warm(sys.argv[1:])
+    data = sys.stdin.buffer.read()
+    if not data:
         return  # the parent gave up
-    job = json.loads(line)
-    from fixturecad.preview import render
-    from fixturecad.registration.generate import write_register_script
-
-    scene_path = Path(job["scene"])
-    scene = pickle.loads(scene_path.read_bytes())
-    scene_path.unlink()
-    render(scene, job["preview"])
-    document = json.loads(Path(job["features"]).read_text(encoding="utf-8"))
-    write_register_script(document, Path(job["register"]))
+    for name, *arguments in pickle.loads(data):
+        module, function = JOBS[name]
+        getattr(importlib.import_module(module), function)(*arguments)
 
 
 if __name__ == "__main__":
