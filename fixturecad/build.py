@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from fixturecad.templates.base import Template
 
 FILES = {"step": "fixture.step", "stl": "fixture.stl", "features": "features.json",
-         "preview": "preview.png", "register": "register.py"}
+         "preview": "preview.png", "register": "register.py", "touches": "touches.template.csv"}
 # Relative agreement required between the BREP volume and the analytic one.
 VOLUME_RELATIVE_TOLERANCE = 1e-6
 # Chord tolerance of the STL tessellation unless asked otherwise, and the accepted range, mm.
@@ -49,6 +49,15 @@ def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_T
     """The features.json of a build of ``template`` (no CAD needed)."""
     files = {"step": FILES["step"], "stl": FILES["stl"], "stl_tolerance_mm": stl_tolerance, "preview": FILES["preview"]}
     return features_json.document(template, files, fixture_tolerance)
+
+
+def touch_template(template: "Template") -> str:
+    """touches.template.csv: the default plan's touches, or the first plan that a point probe alone makes."""
+    from fixturecad.registration.touchfile import touch_csv
+
+    plans = template.touch_plans()
+    name = next(n for n in ["default"] + sorted(plans) if all("sensor" not in e for e in plans[n].touches))
+    return touch_csv(plans[name].touches, name)
 
 
 def default_target(template: "Template", out_root: Path | None = None) -> Path:
@@ -105,6 +114,7 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
               ("register", document, folder / FILES["register"]))
     export(shape, folder / FILES["step"])
     export(shape, folder / FILES["stl"], stl_tolerance, template.slug())
+    (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")
     side.wait()
 
 

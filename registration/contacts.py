@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .elements import LETTERS, core_offset, element, outward, perpendicular_basis, signed_distance
+from .elements import LETTERS, core_offset, distance_and_outward, element, perpendicular_basis
 
 
 # Keys of side geometry: points move with their body as points, the rest as directions.
@@ -174,8 +174,8 @@ def _point_on(rows, xl, x, kind, yl, y):
             for axis, unit in enumerate(_units(r.shape)):
                 rows.add(r[..., axis], {(xl, "o"): unit, (yl, "c"): -unit})
             return
-        u = outward(core, y["c"], None, x.reshape(-1, 3)).reshape(r.shape)
-        rows.add(signed_distance(core, y["c"], None, y["r"], x), {(xl, "o"): u, (yl, "c"): -u})
+        distance, u = distance_and_outward(core, y["c"], None, y["r"], x)
+        rows.add(distance, {(xl, "o"): u, (yl, "c"): -u})
     elif core == "line":
         r = x - y["p"]
         if kind == "L":
@@ -183,13 +183,10 @@ def _point_on(rows, xl, x, kind, yl, y):
                 e = y[key]
                 rows.add(_dot(r, e), {(xl, "o"): e, (yl, "p"): -e, (yl, key): r})
             return
-        along = _dot(r, y["d"])
-        w = core_offset(core, y["p"], y["d"], x)
-        u = w / np.linalg.norm(w, axis=-1)[..., None]
-        rows.add(signed_distance(core, y["p"], y["d"], y["r"], x),
-                 {(xl, "o"): u, (yl, "p"): -u, (yl, "d"): -along[..., None] * u})
+        distance, u = distance_and_outward(core, y["p"], y["d"], y["r"], x)
+        rows.add(distance, {(xl, "o"): u, (yl, "p"): -u, (yl, "d"): -_dot(r, y["d"])[..., None] * u})
     else:
-        rows.add(signed_distance(core, y["q"], y["n"], 0.0, x),
+        rows.add(distance_and_outward(core, y["q"], y["n"], 0.0, x)[0],
                  {(xl, "o"): y["n"], (yl, "q"): -y["n"], (yl, "n"): x - y["q"]})
 
 

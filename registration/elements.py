@@ -79,39 +79,43 @@ def perpendicular_basis(v):
 def core_offset(core: str, anchor, direction, points):
     """The offset (n, 3) of points from a core: from its point, from its line (perpendicular part),
     or along its plane's normal. ``direction``: a line's unit direction or a plane's unit normal."""
-    r = np.asarray(points, float) - anchor
+    r = points - anchor
     if core == "point":
         return r
-    along = np.sum(r * direction, axis=-1, keepdims=True)
+    along = np.einsum("...i,...i->...", r, direction)[..., None]
     return r - along * direction if core == "line" else along * direction
 
 
-def signed_distance(core: str, anchor, direction, radius, points):
-    """Distance (n,) of points from an element, less its radius: positive outside a sphere or a
-    cylinder, along the normal for a plane, unsigned for a point or a line."""
-    offset = core_offset(core, anchor, direction, points)
+def distance_and_outward(core: str, anchor, direction, radius, points):
+    """Signed distance (...,) of points (..., 3) from an element and the unit direction away from its
+    core through them: along the normal for a plane (the normal itself), less the radius for a
+    sphere or a cylinder, unsigned for a point or a line. A point on a point or line core has no
+    such direction: an arbitrary one perpendicular to the core is given."""
     if core == "plane":
-        return np.sum(offset * direction, axis=-1)
-    return np.linalg.norm(offset, axis=-1) - radius
+        return np.einsum("...i,...i->...", points - anchor, direction), direction
+    offset = core_offset(core, anchor, direction, points)
+    length = np.sqrt(np.einsum("...i,...i->...", offset, offset))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = offset / length[..., None]
+    if not length.min(initial=np.inf) >= 1e-12:
+        fallback = perpendicular_basis(direction)[0] if core == "line" else np.array([0.0, 0.0, 1.0])
+        unit = np.where((length < 1e-12)[..., None], np.broadcast_to(fallback, unit.shape), unit)
+    return length - radius, unit
+
+
+def signed_distance(core: str, anchor, direction, radius, points):
+    """Signed distance (...,) of points from an element (:func:`distance_and_outward`)."""
+    return distance_and_outward(core, anchor, direction, radius, points)[0]
 
 
 def outward(core: str, anchor, direction, points):
-    """Unit directions (n, 3) away from the core through each point (a plane's normal).
-
-    A point on a point or line core has no such direction: an arbitrary one
-    perpendicular to the core is given.
-    """
-    points = np.asarray(points, float).reshape(-1, 3)
-    if core == "plane":
-        return np.tile(direction, (len(points), 1))
-    offset = core_offset(core, anchor, direction, points)
-    fallback = perpendicular_basis(direction)[0] if core == "line" else np.array([0.0, 0.0, 1.0])
-    length = np.linalg.norm(offset, axis=1, keepdims=True)
-    return np.where(length > 1e-12, offset / np.maximum(length, 1e-300), fallback)
+    """Unit directions (n, 3) away from the core through each point (:func:`distance_and_outward`)."""
+    unit = distance_and_outward(core, anchor, direction, 0.0, points)[1]
+    return np.broadcast_to(unit, np.shape(points)).copy()
 
 
 def closest_point(core: str, anchor, direction, radius, points):
     """The closest points (n, 3) of an element to the given points."""
     points = np.asarray(points, float).reshape(-1, 3)
-    offset = core_offset(core, anchor, direction, points)
-    return points - offset + radius * outward(core, anchor, direction, points)
+    _, unit = distance_and_outward(core, anchor, direction, radius, points)
+    return points - core_offset(core, anchor, direction, points) + radius * unit

@@ -22,6 +22,7 @@ import argparse
 import csv
 import io
 import json
+import os
 import sys
 
 import numpy as np
@@ -69,6 +70,18 @@ def read_touch_csv(text, feature_ids):
         raise ValueError("the touch file has a header but no touches")
     arrays = {key: np.array(value) for key, value in approaches.items()}
     return {key: np.array(value) for key, value in touches.items()}, (arrays if width == 7 else {}), lines
+
+
+def touch_csv(entries, plan_name):
+    """A touch CSV a user fills in: a point-touch plan's nominal points (fixture frame, mm), with how to."""
+    lines = [f"# Touch plan {plan_name!r}: the nominal points in the fixture frame, mm. Replace each x,y,z",
+             "# by the point the probe measured on that feature (measurement frame), keep the feature ids;",
+             "# add or remove rows as you touch. Lines starting with # are skipped.",
+             ",".join(CSV_COLUMNS)]
+    for entry in entries:
+        for x, y, z in np.asarray(entry["points"], float).reshape(-1, 3):
+            lines.append(f"{entry['feature']},{x:.4f},{y:.4f},{z:.4f}")
+    return "\n".join(lines) + "\n"
 
 
 def read_touch_json(text, feature_ids):
@@ -209,5 +222,9 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2
-    print(json.dumps(result, indent=2) if args.json else format_result(result))
+    try:
+        print(json.dumps(result, indent=2) if args.json else format_result(result), flush=True)
+    except BrokenPipeError:
+        # The reader stopped (``| head``): say nothing more, and let Python's exit not complain either.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return EXIT_CODES[result["status"]]

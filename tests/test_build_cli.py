@@ -229,19 +229,6 @@ def test_a_failed_forced_build_keeps_the_old_folder(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["cube"]
 
 
-def test_the_commands_in_docs_fixtures_md_run(tmp_path):
-    import shlex
-    from pathlib import Path
-
-    text = (Path(__file__).resolve().parent.parent / "docs" / "fixtures.md").read_text()
-    commands = [line[len("$ fixturecad "):] for line in text.splitlines() if line.startswith("$ fixturecad ")]
-    assert commands
-    for command in commands:
-        result = run(*shlex.split(command), cwd=tmp_path)
-        assert result.returncode == 0, (command, result.stderr)
-    assert (tmp_path / "out" / "quarter-sphere-r40" / "fixture.step").exists()
-
-
 def test_template_options_parse_both_spellings_and_refuse_repeats():
     from fixturecad.errors import InputError
     from fixturecad.fixture_commands import parse_template_options

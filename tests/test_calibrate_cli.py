@@ -116,22 +116,3 @@ def test_calibrate_refuses_another_fixtures_points(cube, tmp_path):
     (tmp_path / "m.csv").write_text(text)
     assert_bad_input(run("calibrate", cube, tmp_path / "m.csv", "--out", tmp_path / "out"), "not from this fixture")
     assert not (tmp_path / "out").exists()
-
-
-def test_the_commands_in_docs_tolerance_md_run(tmp_path):
-    import shlex
-    import shutil
-    from pathlib import Path
-
-    docs = Path(__file__).resolve().parent.parent / "docs"
-    shutil.copytree(docs / "examples", tmp_path / "docs" / "examples")
-    text = (docs / "tolerance.md").read_text()
-    commands = [line[len("$ fixturecad "):] for line in text.splitlines() if line.startswith("$ fixturecad ")]
-    assert len(commands) == 4
-    outputs = []
-    for command in commands:
-        result = run(*shlex.split(command), cwd=tmp_path)
-        assert result.returncode == 0, (command, result.stderr)
-        outputs.append(result.stdout)
-    assert "left" in outputs[2] and "OUT of the 0.1 mm zone" in outputs[2]  # as the doc says
-    assert (tmp_path / "out" / "cube-s50-asbuilt" / "calibration.png").exists()
