@@ -1,16 +1,19 @@
-"""Tessellation of a CadQuery solid into a checked triangle mesh (CAD layer).
+"""Tessellation of a CadQuery solid into a checked triangle mesh.
 
 The chord tolerance is absolute, in mm (cadquery's own ``tessellate`` uses
 a relative one): every triangle lies within ``tolerance`` of the surface.
 """
 
 import numpy as np
+from OCP.BRep import BRep_Tool
+from OCP.BRepMesh import BRepMesh_IncrementalMesh
+from OCP.BRepTools import BRepTools
+from OCP.TopAbs import TopAbs_REVERSED
+from OCP.TopLoc import TopLoc_Location
 
 # Largest angle between neighbouring facet normals, rad. The chord tolerance
 # is normally the finer limit; this one only matters on very small radii.
 ANGULAR_TOLERANCE_RAD = 0.5
-
-
 MERGE_DIGITS = 9  # decimals of mm kept when merging the faces' shared boundary nodes
 
 
@@ -23,12 +26,6 @@ def triangulate(shape, tolerance: float, angular_tolerance: float = ANGULAR_TOLE
 
     Returns a list of ``(face, vertices, triangles)``, one entry per face.
     """
-    from OCP.BRep import BRep_Tool
-    from OCP.BRepMesh import BRepMesh_IncrementalMesh
-    from OCP.BRepTools import BRepTools
-    from OCP.TopAbs import TopAbs_REVERSED
-    from OCP.TopLoc import TopLoc_Location
-
     BRepTools.Clean_s(shape.wrapped)
     BRepMesh_IncrementalMesh(shape.wrapped, tolerance, False, angular_tolerance, True)
     out = []
