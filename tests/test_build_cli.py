@@ -77,6 +77,12 @@ def test_schema_refuses_unknown_fields_and_bad_kinds():
     assert load_schema()["additionalProperties"] is False
 
 
+def test_the_shipped_schema_is_a_valid_draft_2020_12_schema():
+    schema = load_schema()
+    assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+    jsonschema.Draft202012Validator.check_schema(schema)
+
+
 @pytest.mark.parametrize("name", list(TEMPLATES))
 def test_step_reimports_as_one_solid_with_the_same_volume(built, name):
     text = (built[name] / "fixture.step").read_text(errors="replace")
