@@ -7,6 +7,7 @@ inlined into the generated standalone ``register.py``.
 import numpy as np
 
 from .least_squares import levenberg_marquardt
+from .patches import patch_points
 from .problem import Problem
 from .solve import solve
 from .verdict import Solution, judged
@@ -71,43 +72,11 @@ def features_beyond_tolerance(problem, solutions, starts=4):
     return sorted(found, key=lambda item: item[3])
 
 
-def _patch_samples(feature, count=400, seed=0):
-    """Points (fixture frame) on a feature's finite patch, for choosing an extra touch."""
-    rng = np.random.default_rng(seed)
-    kind = feature.kind
-    if kind == "point":
-        return feature.point[None]
-    size = 50.0
-    if kind == "plane":
-        from .elements import perpendicular_basis
-
-        e1, e2 = perpendicular_basis(feature.normal)
-        uv = rng.uniform(-size, size, size=(count, 2))
-        pts = feature.point + uv[:, :1] * e1 + uv[:, 1:] * e2
-    elif kind == "sphere":
-        u = rng.normal(size=(count, 3))
-        pts = feature.center + feature.radius * u / np.linalg.norm(u, axis=1, keepdims=True)
-    elif kind == "cylinder":
-        from .elements import perpendicular_basis
-
-        e1, e2 = perpendicular_basis(feature.axis)
-        lo, hi = feature.extent.interval or (-size, size)
-        s = rng.uniform(lo, hi, count)
-        a = rng.uniform(0, 2 * np.pi, count)
-        pts = feature.point + s[:, None] * feature.axis + feature.radius * (
-            np.cos(a)[:, None] * e1 + np.sin(a)[:, None] * e2
-        )
-    else:
-        lo, hi = feature.extent.interval or (-size, size)
-        pts = feature.point + np.linspace(lo, hi, count)[:, None] * feature.direction
-    inside = feature.contains(pts, 1e-6)
-    return pts[inside] if inside.any() else pts[:0]
-
-
 def separating_touch(features, solutions):
     """The point touch that best tells the best candidate pose from all the others.
 
-    Over points on every feature's patch, the touch the best candidate
+    Over points on every feature's finite patch (:func:`.patches.patch_points`:
+    where the feature exists on the solid), the touch the best candidate
     predicts (``point_meas_mm``) is scored by how far it would lie off that
     feature under each other candidate; the smallest of these distances is
     maximised (``separation_mm``).
@@ -117,8 +86,9 @@ def separating_touch(features, solutions):
     a, others = solutions[0], solutions[1:]
     best = None
     for feature in features.values():
-        pts = _patch_samples(feature)
-        if not len(pts):
+        try:
+            pts = patch_points(feature)
+        except ValueError:  # an empty or unbounded patch offers no touch
             continue
         meas = pts @ a.rotation.T + a.translation
         gap = np.full(len(pts), np.inf)

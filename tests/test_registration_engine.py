@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from fixturecad.registration.ambiguity import _patch_samples
+from fixturecad.registration.patches import patch_points
 from fixturecad.registration.contacts import residuals_and_jacobian
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.mobility import matrix_rank
@@ -313,8 +313,8 @@ def test_a_touch_labelled_with_the_wrong_feature_is_flagged():
     truth = _random_pose(rng)
     local = {}
     for fid, feature in features.items():
-        samples = _patch_samples(feature, count=50, seed=1)
-        local[fid] = samples[:4]
+        samples = patch_points(feature)
+        local[fid] = samples[np.random.default_rng(1).choice(len(samples), 4, replace=False)]
     touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in local.items()}
     touches = {k: v + rng.normal(scale=0.002, size=v.shape) for k, v in touches.items()}
     # Move the last touch on "front" to "left": labelled front, it was taken on left.
