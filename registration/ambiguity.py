@@ -1,6 +1,6 @@
 """When the touches do not settle the pose: what explains an inconsistency, what separates candidates.
 
-This module imports numpy and scipy only and nothing of fixturecad: it is
+This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 

@@ -8,7 +8,7 @@ those the datum frame leaves (:mod:`.deviations`), so the as-built features
 come out in the part's own datum frame. Their covariance is what the
 registration then uses in place of the print tolerance.
 
-This module imports numpy and scipy only and nothing of fixturecad.
+This module imports numpy only and nothing of fixturecad.
 """
 
 from dataclasses import dataclass

@@ -9,7 +9,7 @@ with ``J_d`` the rows' change with each mode and ``S`` the modes'
 covariance, and the rows are whitened by it (generalised least squares).
 The modes are thereby marginalised: the pose covariance includes them.
 
-This module imports numpy and scipy only and nothing of fixturecad: it is
+This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 

@@ -22,7 +22,7 @@ with the covariance ``(J^T C^-1 J)^-1``, at the true pose the Cramer-Rao
 bound of the noise model (:mod:`.uncertainty`). Covariances are over
 (rotation vector rad, fixture origin mm), both in the measurement frame.
 
-This module imports numpy and scipy only and nothing of fixturecad: it is
+This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 

@@ -1,6 +1,6 @@
 """The stacked problem: whitened residuals and their twist Jacobian at any pose.
 
-This module imports numpy and scipy only and nothing of fixturecad: it is
+This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 

@@ -458,3 +458,14 @@ def test_a_ball_tip_contact_mixes_with_point_touches():
     result = register_touches(features, touches, contacts=contacts)
     assert result["status"] == "unique"
     assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
+
+
+def test_the_chi_square_quantile_is_scipys():
+    """The residual test's quantile, from the closed forms of integer dof, equals scipy's to 1e-10."""
+    from scipy.stats import chi2
+
+    from fixturecad.registration.verdict import chi_square_quantile
+
+    for probability in (0.5, 0.95, 0.999):
+        for dof in list(range(1, 60)) + [99, 100, 257, 1000]:
+            assert chi_square_quantile(probability, dof) == pytest.approx(chi2.ppf(probability, dof), rel=1e-10)
