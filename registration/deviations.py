@@ -138,30 +138,9 @@ class FixtureTolerance:
         return frame_change(self.scheme, self.features, self.part(deviations))
 
     def printed_entry(self, entry, deviations):
-        """A touch-plan entry (fixture frame) made on the printed part instead of the drawing.
-
-        Point touches go to the nearest point of the printed surface; a
-        sensor moves with its feature, and off a grown sphere or cylinder.
-        """
+        """A touch-plan entry (fixture frame) made on the printed part instead of the model (:func:`entry_on`)."""
         fid = entry["feature"]
-        m, c = self.modes[fid], np.asarray(deviations[fid], float)
-        printed = deviated(m, c)
-        points = np.asarray(entry["points"], float).reshape(-1, 3)
-        if "sensor" not in entry:
-            return {**entry, "points": printed.closest_point(points).tolist()}
-        R, t = motion_from_twist(c @ m.twists)
-        grow = float(c @ m.radius)
-        points = points @ R.T + t
-        points = points + grow * printed.normal_at(points)
-        sensor = dict(entry["sensor"])
-        for key in ("point", "center"):
-            if key in sensor:
-                moved_point = R @ np.asarray(sensor[key], float) + t
-                sensor[key] = (moved_point + grow * printed.normal_at(moved_point)[0]).tolist()
-        for key in ("normal", "direction", "axis"):
-            if key in sensor:
-                sensor[key] = (R @ np.asarray(sensor[key], float)).tolist()
-        return {**entry, "points": points.tolist(), "sensor": sensor}
+        return entry_on(entry, self.modes[fid], deviations[fid])
 
     def feature_twists(self, fid, rotation, translation):
         """The mode twists (k, 6) of one feature mapped into the measurement frame at a pose.
@@ -223,3 +202,29 @@ def tolerance_from_document(features, document, zone_mm=None):
     zone = float(document.get("tolerance", {}).get("zone_mm", 0.0)) if zone_mm is None else float(zone_mm)
     # An as-built part is its own features even when taken as exact.
     return FixtureTolerance(features, scheme, zone) if zone > 0 or calibration is not None else None
+
+
+def entry_on(entry, mode_set, coordinates):
+    """A touch-plan entry (fixture frame) on ``mode_set``'s feature deviated by ``coordinates``.
+
+    Point touches go to the nearest point of the deviated surface; a sensor
+    moves with its feature, and off a grown sphere or cylinder.
+    """
+    c = np.asarray(coordinates, float)
+    printed = deviated(mode_set, c)
+    points = np.asarray(entry["points"], float).reshape(-1, 3)
+    if "sensor" not in entry:
+        return {**entry, "points": printed.closest_point(points).tolist()}
+    R, t = motion_from_twist(c @ mode_set.twists)
+    grow = float(c @ mode_set.radius)
+    points = points @ R.T + t
+    points = points + grow * printed.normal_at(points)
+    sensor = dict(entry["sensor"])
+    for key in ("point", "center"):
+        if key in sensor:
+            moved_point = R @ np.asarray(sensor[key], float) + t
+            sensor[key] = (moved_point + grow * printed.normal_at(moved_point)[0]).tolist()
+    for key in ("normal", "direction", "axis"):
+        if key in sensor:
+            sensor[key] = (R @ np.asarray(sensor[key], float)).tolist()
+    return {**entry, "points": points.tolist(), "sensor": sensor}

@@ -11,7 +11,9 @@ import numpy as np
 
 from .defaults import SENSOR_LEVER_MM
 from .synthetic import perturb_touches, plan_touches
+from .deviations import entry_on
 from .features import feature_from_json
+from .tolerance import coordinates, modes
 from .pose import fixture2meas_from_rt, random_rotation
 
 VERTEX_ON_SURFACE_MM = 1e-3  # a feature's triangles have all three vertices this close to it
@@ -86,8 +88,8 @@ class TouchSampler:
         self.features = {entry["id"]: feature_from_json(entry) for entry in document["features"]}
         self.tolerance = tolerance  # the FixtureTolerance printed parts are drawn from
         # The mesh is the drawing's: an as-built folder keeps the drawing's features to find it by.
-        drawing = (document.get("calibration") or {}).get("drawing", document["features"])
-        self.drawing = {entry["id"]: feature_from_json(entry) for entry in drawing}
+        drawing = (document.get("calibration") or {}).get("drawing")
+        self.drawing = self.features if drawing is None else {e["id"]: feature_from_json(e) for e in drawing}
         self.entries = plan_entries(document, plan)
         self.mesh = mesh
         self.random_positions = random_positions
@@ -108,7 +110,8 @@ class TouchSampler:
             self.snapped.append(points)
 
     def fixture_entries(self, rng):
-        """Plan entries with their points on the mesh (nominal or random), fixture frame."""
+        """Plan entries with their points on the mesh (nominal or random), fixture frame; on an
+        as-built folder, moved from the drawing's features onto the as-built ones."""
         out = []
         for entry, snapped in zip(self.entries, self.snapped):
             points = snapped
@@ -119,7 +122,11 @@ class TouchSampler:
                 elif feature.kind == "line" and feature.extent.interval is not None:
                     s = rng.uniform(*feature.extent.interval, size=len(points))
                     points = feature.point + s[:, None] * feature.direction
-            out.append({**entry, "points": np.asarray(points).tolist()})
+            entry = {**entry, "points": np.asarray(points).tolist()}
+            if self.features[entry["feature"]] is not feature:
+                modes_of_drawing = modes(feature)
+                entry = entry_on(entry, modes_of_drawing, coordinates(modes_of_drawing, self.features[entry["feature"]]))
+            out.append(entry)
         return out
 
     def draw(self, rng, noise_mm, fixture2meas=None, lever_mm=SENSOR_LEVER_MM, printed=None):
