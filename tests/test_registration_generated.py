@@ -232,3 +232,18 @@ def test_ambiguous_exits_3(tmp_path):
     features = features_from_json(features_document("cube"))
     assert main(features, lambda *a, **k: result, [str(tmp_path / "t.csv")], default_sigma_mm=0.005) == 3
     assert EXIT_CODES == {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent": 5}
+
+
+def test_register_py_embeds_every_module_its_modules_import():
+    """The one list of embedded modules is closed under the modules' own relative imports."""
+    from fixturecad.registration.generate import EMBEDDED_MODULES
+
+    root = Path(__file__).resolve().parent.parent / "registration"
+    for name in EMBEDDED_MODULES:
+        for node in ast.walk(ast.parse((root / f"{name}.py").read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                assert node.module in EMBEDDED_MODULES, (name, node.module)
+            if isinstance(node, ast.Import) or (isinstance(node, ast.ImportFrom) and node.level == 0):
+                top = (node.module if isinstance(node, ast.ImportFrom) else node.names[0].name).split(".")[0]
+                assert top in ("numpy", "scipy", "math", "dataclasses", "functools", "argparse", "csv", "io",
+                               "json", "os", "sys"), (name, top)
