@@ -329,7 +329,10 @@ def plot_errors(records, summary, path: Path) -> None:
         ax.set_xlabel(label)
         ax.set_ylabel("trials")
         ax.legend()
-    fig.suptitle(f"{summary['trials']} trials, noise {summary['noise_mm']} mm, success {100 * summary['success_rate']:.1f} %")
+    part = ("an as-built part" if summary["calibrated"] else "an exact part" if summary["fixture_tolerance_mm"] is None
+            else f"parts printed within {summary['fixture_tolerance_mm']:g} mm (the bound counts the print)")
+    fig.suptitle(f"{summary['trials']} trials on {part}, noise {summary['noise_mm']} mm, "
+                 f"success {100 * summary['success_rate']:.1f} %")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
