@@ -122,32 +122,24 @@ def test_calibration_recovers_the_printed_part(name):
     assert dt < 0.005 and dr < 1e-4
 
 
-def test_calibration_refuses_points_that_leave_a_mode_open():
-    """Points on one line of a plane leave its tilt across that line undetermined."""
+LINE_ON_LEFT = np.column_stack([np.zeros(50), np.linspace(5.0, 45.0, 50), np.full(50, 25.0)])
+REFUSALS = {
+    # Points on one line of a plane leave its tilt across that line undetermined.
+    "a mode left open": (lambda points, rng: points.update(left=LINE_ON_LEFT), "left leave its tilt_.*undetermined"),
+    "another fixture's points": (lambda points, rng: points.update(
+        top=points["top"] + rng.normal(scale=3.0, size=points["top"].shape)), "not from this fixture"),
+    "a feature not measured": (lambda points, rng: points.pop("front"), "no points on feature front"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(REFUSALS))
+def test_calibration_refuses_with_the_reason(case):
     template, features = nominal("cube")
     rng = np.random.default_rng(6)
     points = measured(features, features, np.eye(4), rng, 50, 0.001)
-    line = np.linspace(5.0, 45.0, 50)
-    points["left"] = np.column_stack([np.zeros(50), line, np.full(50, 25.0)])
-    with pytest.raises(ValueError, match="left leave its tilt_.*undetermined"):
-        calibrate(features, template.DATUMS, points, 0.001, 0.1)
-
-
-def test_calibration_refuses_another_fixtures_points():
-    template, features = nominal("cube")
-    rng = np.random.default_rng(7)
-    points = measured(features, features, np.eye(4), rng, 50, 0.001)
-    points["top"] = points["top"] + np.array([0.0, 0.0, 0.0]) * 0 + rng.normal(scale=3.0, size=points["top"].shape)
-    with pytest.raises(ValueError, match="not from this fixture"):
-        calibrate(features, template.DATUMS, points, 0.001, 0.1)
-
-
-def test_calibration_needs_every_feature():
-    template, features = nominal("cube")
-    rng = np.random.default_rng(8)
-    points = measured(features, features, np.eye(4), rng, 20, 0.001)
-    del points["front"]
-    with pytest.raises(ValueError, match="no points on feature front"):
+    spoil, reason = REFUSALS[case]
+    spoil(points, rng)
+    with pytest.raises(ValueError, match=reason):
         calibrate(features, template.DATUMS, points, 0.001, 0.1)
 
 
