@@ -8,17 +8,21 @@ import numpy as np
 
 from .contacts import DIRECTION_KEYS, POINT_KEYS, residuals_and_jacobian
 from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+from .deviations import deviation_rows
 from .noise import is_point_sensor, placement_centre, whitened
 from .touches import TouchGroup
 
 RADIUS_DERIVATIVE_REACH = 1e-2  # rad and mm: how far the pose may move before a radius derivative is redone
 
+
 class Problem:
     """A stacked touch plan: whitened residuals (m,) and twist Jacobian (m, 6) at any pose.
 
     Rows are whitened touch by touch under the sensor noise model
-    (:func:`row_whitening`, at the pose evaluated) and stay in mm: their
-    covariance is ``sigma_mm^2 I``.
+    (:func:`.noise.row_whitening`, at the pose evaluated) and, on a printed
+    part (``tolerance``, a :class:`.deviations.FixtureTolerance`), for the
+    features' deviations shared by their touches (:mod:`.deviations`). They
+    stay in mm: their covariance is ``sigma_mm^2 I``.
     """
 
     def __init__(self, groups, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM, tolerance=None):
@@ -56,8 +60,6 @@ class Problem:
         r, J = self.sensor_rows(rotation, translation)
         if self.tolerance is None:
             return r, J
-        from .deviations import deviation_rows
-
         Jd = deviation_rows(self, self.tolerance, rotation, translation, J)
         C = np.eye(len(r)) + Jd @ self.tolerance.covariance @ Jd.T / self.sigma**2
         whitened = np.linalg.solve(np.linalg.cholesky(C), np.column_stack([r, J]))

@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .patches import patch_size
+from .patches import patch_points, patch_size
 from .pose import motion_from_twist
 
 # Each mode's share of the half zone (zone_mm / 2): position, orientation and size add up to 1.
@@ -189,6 +189,4 @@ def random_coordinates(mode_set: Modes, zone_mm, rng):
 
 def departure_mm(nominal, actual):
     """The largest distance (mm) of the actual surface from the nominal one over the nominal patch."""
-    from .patches import patch_points
-
     return float(np.abs(actual.signed_distance(patch_points(nominal))).max())
