@@ -145,7 +145,8 @@ def _units(shape):
 
 def _orientation(kind):
     """What a fixed element knows at its contact point besides the point."""
-    return {"P": None, "L": "direction"}.get(kind, "normal")
+    el = element(kind)
+    return "normal" if el.surface else "direction" if el.core == "line" else None
 
 
 class _Rows:

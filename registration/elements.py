@@ -41,10 +41,34 @@ class Element:
         """Whether the element has a radius of its own (a sphere or a cylinder)."""
         return any(side == "r" for _, side in self.keys)
 
-    def side_geometry(self, geometry: dict) -> dict:
-        """Contact-model keys of the element from its features.json geometry (by json key)."""
+    @property
+    def surface(self) -> bool:
+        """Whether the element bounds material, with an outward normal (a plane, a sphere, a cylinder)."""
+        return self.round or self.core == "plane"
+
+    @property
+    def anchor_key(self) -> str:
+        """The contact-model key of the core's point: a point's ``c``, a line's ``p``, a plane's ``q``."""
+        return ANCHOR_KEYS[self.core]
+
+    def side_geometry(self, geometry) -> dict:
+        """Contact-model keys of the element from its features.json geometry: a mapping by json key,
+        or an object with the json keys as attributes (a feature)."""
+        if not isinstance(geometry, dict):
+            return {side: getattr(geometry, json) for json, side in self.keys}
         return {side: geometry[json] for json, side in self.keys}
 
+    def core_of(self, geometry) -> tuple:
+        """(core, anchor (3,), direction (3,) or None, radius mm) of the distances below, from
+        features.json geometry (see :meth:`side_geometry`)."""
+        side = self.side_geometry(geometry)
+        return self.core, side[self.anchor_key], side.get(DIRECTION_KEYS.get(self.core)), side.get("r", 0.0)
+
+
+# The contact-model keys of each core: its point, and a line's direction or a plane's normal.
+ANCHOR_KEYS = {"point": "c", "line": "p", "plane": "q"}
+DIRECTION_KEYS = {"line": "d", "plane": "n"}
+CORE_WORDS = {"point": "centre", "line": "axis"}  # what a reader calls the core of a sphere, of a cylinder
 
 ELEMENTS = (
     Element("P", "point", "point", (("point", "c"),)),

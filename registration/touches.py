@@ -44,7 +44,7 @@ class TouchGroup:
 def fixture_side(feature, fixed: bool, **extra):
     """The contact-model side of a feature in the fixture frame (a point is always fixed, at itself)."""
     el = element(feature.kind)
-    geometry = el.side_geometry({key: getattr(feature, key) for key in el.json_keys})
+    geometry = el.side_geometry(feature)
     if el.letter == "P":
         fixed, geometry["o"] = True, feature.point
     return make_side(el.letter, fixed, **geometry, **extra)
@@ -116,7 +116,7 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
     geometry = {key: value[None] for key, value in sensor_geometry(ctype, sensor, contact_point).items()}
     side = make_side(ctype.sensor, ctype.sensor_fixed, **geometry)
     extra = {key: np.asarray(value, dtype=np.float64) for key, value in (fixture or {}).items()}
-    if ctype.fixture_fixed and "o" in extra and "u" not in extra and feature.kind in ("plane", "sphere", "cylinder"):
+    if ctype.fixture_fixed and "o" in extra and "u" not in extra and element(feature.kind).surface:
         extra["u"] = feature.normal_at(extra["o"])[0]
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
     if rho is None:
