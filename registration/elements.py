@@ -49,7 +49,7 @@ class Element:
     @property
     def anchor_key(self) -> str:
         """The contact-model key of the core's point: a point's ``c``, a line's ``p``, a plane's ``q``."""
-        return ANCHOR_KEYS[self.core]
+        return CORE_KEYS[self.core][0]
 
     def side_geometry(self, geometry) -> dict:
         """Contact-model keys of the element from its features.json geometry: a mapping by json key,
@@ -62,12 +62,12 @@ class Element:
         """(core, anchor (3,), direction (3,) or None, radius mm) of the distances below, from
         features.json geometry (see :meth:`side_geometry`)."""
         side = self.side_geometry(geometry)
-        return self.core, side[self.anchor_key], side.get(DIRECTION_KEYS.get(self.core)), side.get("r", 0.0)
+        anchor, direction = CORE_KEYS[self.core]
+        return self.core, side[anchor], side.get(direction), side.get("r", 0.0)
 
 
 # The contact-model keys of each core: its point, and a line's direction or a plane's normal.
-ANCHOR_KEYS = {"point": "c", "line": "p", "plane": "q"}
-DIRECTION_KEYS = {"line": "d", "plane": "n"}
+CORE_KEYS = {"point": ("c", None), "line": ("p", "d"), "plane": ("q", "n")}
 CORE_WORDS = {"point": "centre", "line": "axis"}  # what a reader calls the core of a sphere, of a cylinder
 
 ELEMENTS = (
@@ -112,11 +112,12 @@ def core_offset(core: str, anchor, direction, points):
 
 def distance_and_outward(core: str, anchor, direction, radius, points):
     """Signed distance (...,) of points (..., 3) from an element and the unit direction away from its
-    core through them: along the normal for a plane (the normal itself), less the radius for a
-    sphere or a cylinder, unsigned for a point or a line. A point on a point or line core has no
+    core through them. The distance is the offset from the core less the radius: along the normal
+    for a plane core (the direction is the normal itself), the offset's length for a point or a
+    line core (unsigned for a point or a line, radius 0). A point on a point or line core has no
     such direction: an arbitrary one perpendicular to the core is given."""
     if core == "plane":
-        return np.einsum("...i,...i->...", points - anchor, direction), direction
+        return np.einsum("...i,...i->...", points - anchor, direction) - radius, direction
     offset = core_offset(core, anchor, direction, points)
     length = np.sqrt(np.einsum("...i,...i->...", offset, offset))
     with np.errstate(divide="ignore", invalid="ignore"):
