@@ -13,6 +13,7 @@ the generated standalone ``register.py``.
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -32,21 +33,21 @@ class Element:
     core: str
     keys: tuple
 
-    @property
+    @cached_property
     def json_keys(self) -> tuple:
         return tuple(json for json, _ in self.keys)
 
-    @property
+    @cached_property
     def round(self) -> bool:
         """Whether the element has a radius of its own (a sphere or a cylinder)."""
         return any(side == "r" for _, side in self.keys)
 
-    @property
+    @cached_property
     def surface(self) -> bool:
         """Whether the element bounds material, with an outward normal (a plane, a sphere, a cylinder)."""
         return self.round or self.core == "plane"
 
-    @property
+    @cached_property
     def anchor_key(self) -> str:
         """The contact-model key of the core's point: a point's ``c``, a line's ``p``, a plane's ``q``."""
         return CORE_KEYS[self.core][0]
