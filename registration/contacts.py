@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .elements import LETTERS, core_offset, distance_and_outward, element, perpendicular_basis
+from .elements import CORE_KEYS, LETTERS, core_offset, distance_and_outward, element, perpendicular_basis
 
 
 # Keys of side geometry: points move with their body as points, the rest as directions.
@@ -145,7 +145,8 @@ def _units(shape):
 
 def _orientation(kind):
     """What a fixed element knows at its contact point besides the point."""
-    return {"P": None, "L": "direction"}.get(kind, "normal")
+    el = element(kind)
+    return "normal" if el.surface else "direction" if el.core == "line" else None
 
 
 class _Rows:
@@ -160,34 +161,37 @@ class _Rows:
         self.grads.append(grads)
 
 
+def _distance_row(rows, xl, xkey, x, core, yl, y, radius):
+    """One row: the signed distance of point ``x`` (key ``xkey`` of side ``xl``) from the core of side
+    ``yl``'s element (``y``) grown by ``radius`` (:func:`.elements.distance_and_outward`)."""
+    anchor_key, direction_key = CORE_KEYS[core]
+    anchor, direction = y[anchor_key], y.get(direction_key)
+    distance, u = distance_and_outward(core, anchor, direction, radius, x)
+    grads = {(xl, xkey): u, (yl, anchor_key): -u}
+    if core == "line":
+        grads[(yl, "d")] = -_dot(x - anchor, direction)[..., None] * u
+    elif core == "plane":
+        grads[(yl, "n")] = x - anchor
+    rows.add(distance, grads)
+
+
 def _point_on(rows, xl, x, kind, yl, y):
     """Point ``x`` (key ``o`` of side ``xl``) lies on the element ``y`` of side ``yl``.
 
     A point or a line: the components of the offset from it; otherwise the
-    element's signed distance: the offset along a plane's normal, the
-    offset's length less the radius of a sphere or a cylinder (:mod:`.elements`).
+    element's signed distance (:func:`_distance_row`).
     """
-    core = element(kind).core
-    if core == "point":
-        r = core_offset(core, y["c"], None, x)
-        if kind == "P":
-            for axis, unit in enumerate(_units(r.shape)):
-                rows.add(r[..., axis], {(xl, "o"): unit, (yl, "c"): -unit})
-            return
-        distance, u = distance_and_outward(core, y["c"], None, y["r"], x)
-        rows.add(distance, {(xl, "o"): u, (yl, "c"): -u})
-    elif core == "line":
+    if kind == "P":
+        r = core_offset("point", y["c"], None, x)
+        for axis, unit in enumerate(_units(r.shape)):
+            rows.add(r[..., axis], {(xl, "o"): unit, (yl, "c"): -unit})
+    elif kind == "L":
         r = x - y["p"]
-        if kind == "L":
-            for key in ("e1", "e2"):
-                e = y[key]
-                rows.add(_dot(r, e), {(xl, "o"): e, (yl, "p"): -e, (yl, key): r})
-            return
-        distance, u = distance_and_outward(core, y["p"], y["d"], y["r"], x)
-        rows.add(distance, {(xl, "o"): u, (yl, "p"): -u, (yl, "d"): -_dot(r, y["d"])[..., None] * u})
+        for key in ("e1", "e2"):
+            e = y[key]
+            rows.add(_dot(r, e), {(xl, "o"): e, (yl, "p"): -e, (yl, key): r})
     else:
-        rows.add(distance_and_outward(core, y["q"], y["n"], 0.0, x)[0],
-                 {(xl, "o"): y["n"], (yl, "q"): -y["n"], (yl, "n"): x - y["q"]})
+        _distance_row(rows, xl, "o", x, element(kind).core, yl, y, y.get("r", 0.0))
 
 
 def _line_tangent(rows, xl, x, kind, yl, y):
@@ -265,21 +269,8 @@ def _mobile_mobile(rows, A, a, B, b, rho):
     sides.sort(key=lambda side: order[element(side[1].kind).core])
     (l1, s1, g1), (l2, s2, g2) = sides
     cores = (element(s1.kind).core, element(s2.kind).core)
-    if cores == ("point", "point"):
-        r = g1["c"] - g2["c"]
-        length = np.linalg.norm(r, axis=-1)
-        u = r / length[..., None]
-        rows.add(length - rho, {(l1, "c"): u, (l2, "c"): -u})
-    elif cores == ("point", "line"):
-        r = g1["c"] - g2["p"]
-        along = _dot(r, g2["d"])
-        w = r - along[..., None] * g2["d"]
-        length = np.linalg.norm(w, axis=-1)
-        u = w / length[..., None]
-        rows.add(length - rho, {(l1, "c"): u, (l2, "p"): -u, (l2, "d"): -along[..., None] * u})
-    elif cores == ("point", "plane"):
-        r = g1["c"] - g2["q"]
-        rows.add(_dot(g2["n"], r) - rho, {(l1, "c"): g2["n"], (l2, "q"): -g2["n"], (l2, "n"): r})
+    if cores[0] == "point":
+        _distance_row(rows, l1, "c", g1["c"], cores[1], l2, g2, rho)
     elif cores == ("line", "line"):
         # Unsigned distance between the lines: the sign of a cross product flips
         # when the lines turn past parallel, the distance does not.

@@ -13,6 +13,7 @@ the generated standalone ``register.py``.
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -32,19 +33,43 @@ class Element:
     core: str
     keys: tuple
 
-    @property
+    @cached_property
     def json_keys(self) -> tuple:
         return tuple(json for json, _ in self.keys)
 
-    @property
+    @cached_property
     def round(self) -> bool:
         """Whether the element has a radius of its own (a sphere or a cylinder)."""
         return any(side == "r" for _, side in self.keys)
 
-    def side_geometry(self, geometry: dict) -> dict:
-        """Contact-model keys of the element from its features.json geometry (by json key)."""
+    @cached_property
+    def surface(self) -> bool:
+        """Whether the element bounds material, with an outward normal (a plane, a sphere, a cylinder)."""
+        return self.round or self.core == "plane"
+
+    @cached_property
+    def anchor_key(self) -> str:
+        """The contact-model key of the core's point: a point's ``c``, a line's ``p``, a plane's ``q``."""
+        return CORE_KEYS[self.core][0]
+
+    def side_geometry(self, geometry) -> dict:
+        """Contact-model keys of the element from its features.json geometry: a mapping by json key,
+        or an object with the json keys as attributes (a feature)."""
+        if not isinstance(geometry, dict):
+            return {side: getattr(geometry, json) for json, side in self.keys}
         return {side: geometry[json] for json, side in self.keys}
 
+    def core_of(self, geometry) -> tuple:
+        """(core, anchor (3,), direction (3,) or None, radius mm) of the distances below, from
+        features.json geometry (see :meth:`side_geometry`)."""
+        side = self.side_geometry(geometry)
+        anchor, direction = CORE_KEYS[self.core]
+        return self.core, side[anchor], side.get(direction), side.get("r", 0.0)
+
+
+# The contact-model keys of each core: its point, and a line's direction or a plane's normal.
+CORE_KEYS = {"point": ("c", None), "line": ("p", "d"), "plane": ("q", "n")}
+CORE_WORDS = {"point": "centre", "line": "axis"}  # what a reader calls the core of a sphere, of a cylinder
 
 ELEMENTS = (
     Element("P", "point", "point", (("point", "c"),)),
@@ -88,11 +113,12 @@ def core_offset(core: str, anchor, direction, points):
 
 def distance_and_outward(core: str, anchor, direction, radius, points):
     """Signed distance (...,) of points (..., 3) from an element and the unit direction away from its
-    core through them: along the normal for a plane (the normal itself), less the radius for a
-    sphere or a cylinder, unsigned for a point or a line. A point on a point or line core has no
+    core through them. The distance is the offset from the core less the radius: along the normal
+    for a plane core (the direction is the normal itself), the offset's length for a point or a
+    line core (unsigned for a point or a line, radius 0). A point on a point or line core has no
     such direction: an arbitrary one perpendicular to the core is given."""
     if core == "plane":
-        return np.einsum("...i,...i->...", points - anchor, direction), direction
+        return np.einsum("...i,...i->...", points - anchor, direction) - radius, direction
     offset = core_offset(core, anchor, direction, points)
     length = np.sqrt(np.einsum("...i,...i->...", offset, offset))
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -175,7 +175,7 @@ def _check_sensing(sensing):
 class _Feature:
     """Shared behaviour: the distances of the element table, the patch, the JSON entry.
 
-    A subclass names its element (``kind``) and where its core and radius are.
+    A subclass names its element (``kind``) and holds its features.json geometry keys as attributes.
     """
 
     kind = ""
@@ -185,20 +185,20 @@ class _Feature:
         """The paper's element letter: PL, S, C, L or P."""
         return element(self.kind).letter
 
-    def _core(self):
+    def core(self):
         """(core, anchor, direction, radius) of the element table's distances."""
-        raise NotImplementedError
+        return element(self.kind).core_of(self)
 
     def signed_distance(self, points):
-        core, anchor, direction, radius = self._core()
+        core, anchor, direction, radius = self.core()
         return signed_distance(core, anchor, direction, radius, check_points(points))
 
     def normal_at(self, points):
-        core, anchor, direction, _ = self._core()
+        core, anchor, direction, _ = self.core()
         return outward(core, anchor, direction, check_points(points))
 
     def closest_point(self, points):
-        core, anchor, direction, radius = self._core()
+        core, anchor, direction, radius = self.core()
         return closest_point(core, anchor, direction, radius, check_points(points))
 
     def contains(self, points, tol_mm=1e-6):
@@ -224,7 +224,7 @@ class _Axial(_Feature):
     """Cylinders and lines: the axial parameter t along the axis through ``point``."""
 
     def _parameter(self, points):
-        return (check_points(points) - self.point) @ self._core()[2]
+        return (check_points(points) - self.point) @ self.core()[2]
 
 
 @dataclass
@@ -244,9 +244,6 @@ class Plane(_Feature):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def _core(self):
-        return "plane", self.point, self.normal, 0.0
-
 
 @dataclass
 class Sphere(_Feature):
@@ -264,9 +261,6 @@ class Sphere(_Feature):
         self.radius = check_radius(self.radius, "sphere radius")
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
-
-    def _core(self):
-        return "point", self.center, None, self.radius
 
 
 @dataclass
@@ -288,9 +282,6 @@ class Cylinder(_Axial):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def _core(self):
-        return "line", self.point, self.axis, self.radius
-
 
 @dataclass
 class Line(_Axial):
@@ -309,9 +300,6 @@ class Line(_Axial):
         self.extent = _extent(self.extent)
         self.sensing = _check_sensing(self.sensing)
 
-    def _core(self):
-        return "line", self.point, self.direction, 0.0
-
 
 @dataclass
 class Point(_Feature):
@@ -326,9 +314,6 @@ class Point(_Feature):
         self.point = check_vector(self.point, "point")
         self.sensing = _check_sensing(self.sensing)
         self.extent = Extent()
-
-    def _core(self):
-        return "point", self.point, None, 0.0
 
 
 FEATURE_CLASSES = {cls.kind: cls for cls in (Plane, Sphere, Cylinder, Line, Point)}

@@ -15,7 +15,7 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
-from .elements import perpendicular_basis
+from .elements import CORE_WORDS, element, perpendicular_basis
 from .mobility import matrix_rank, null_space
 
 COLLINEAR_MM = 1e-6  # touches this close to the line through the first and last lie on it
@@ -130,16 +130,13 @@ def free_motions(problem, solution, features=None):
             lines[f"the line through the centres of {a.id} and {b.id}"] = (
                 a.center, (b.center - a.center) / np.linalg.norm(b.center - a.center))
     for f in listed.values():
-        if f.kind == "plane":
-            planes[f.id] = (f.point, f.normal)
-        elif f.kind == "sphere":
-            points[f"the centre of {f.id}"] = f.center
-        elif f.kind == "cylinder":
-            lines[f"the axis of {f.id}"] = (f.point, f.axis)
-        elif f.kind == "line":
-            lines[f.id] = (f.point, f.direction)
+        # A feature names its core: a plane, a point or line itself, a sphere's centre, a cylinder's axis.
+        core, anchor, direction, _ = f.core()
+        name = f"the {CORE_WORDS[core]} of {f.id}" if element(f.kind).round else f.id
+        if core == "point":
+            points[name] = anchor
         else:
-            points[f.id] = f.point
+            (planes if core == "plane" else lines)[name] = (anchor, direction)
     # The features' own lines before those through touches or centres.
     return free_motion_names(free, points, {**{k: v for k, v in lines.items() if not k.startswith("the line")},
                                             **{k: v for k, v in lines.items() if k.startswith("the line")},

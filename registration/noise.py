@@ -34,7 +34,7 @@ def placement_centre(kind, geometry, contact_point=None):
         return geometry["o"]
     if contact_point is not None:
         return np.asarray(contact_point, dtype=np.float64)
-    return geometry[{"plane": "q", "point": "c", "line": "p"}[element(kind).core]]
+    return geometry[element(kind).anchor_key]
 
 
 def row_whitening(jacobian, centres, lever_mm=SENSOR_LEVER_MM):

@@ -58,40 +58,40 @@ def patch_points(feature):
 
 
 def _patch(feature):
-    """Points on the patch and the spacing (mm) of the grid they come from."""
-    kind = feature.kind
-    if kind == "point":
-        return feature.point[None], 0.0
+    """Points on the patch and the spacing (mm) of the grid they come from: a point core is the
+    point itself or a sphere around it, a line core the line itself or a cylinder around it."""
+    core, anchor, axis, radius = feature.core()
+    if core == "point" and not radius:
+        return anchor[None], 0.0
     inside = lambda p: feature.contains(p, 1e-9)  # noqa: E731
-    if kind == "plane":
-        e1, e2 = perpendicular_basis(feature.normal)
-        return _cover(feature, inside, lambda uv: feature.point + uv[:, :1] * e1 + uv[:, 1:] * e2, np.zeros(2))
-    if kind == "sphere":
+    if core == "plane":
+        e1, e2 = perpendicular_basis(axis)
+        return _cover(feature, inside, lambda uv: anchor + uv[:, :1] * e1 + uv[:, 1:] * e2, np.zeros(2))
+    if core == "point":
         n = GRID * GRID
         k = np.arange(n) + 0.5
         z = 1.0 - 2.0 * k / n
         phi = np.pi * (1.0 + 5**0.5) * k
         s = np.sqrt(1.0 - z * z)
-        points = feature.center + feature.radius * np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+        points = anchor + radius * np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
         points = points[inside(points)]
         if not len(points):
             raise ValueError(f"the patch of feature {feature.id} is empty")
         return points, 0.0
-    axis = feature.axis if kind == "cylinder" else feature.direction
     if feature.extent.interval is not None:
         t = np.linspace(*feature.extent.interval, GRID)
     else:
         t = None
-    if kind == "line":
+    if not radius:
         if t is None:
-            return _cover(feature, inside, lambda uv: feature.point + uv[:, :1] * axis, np.zeros(2))
-        points = feature.point + t[:, None] * axis
+            return _cover(feature, inside, lambda uv: anchor + uv[:, :1] * axis, np.zeros(2))
+        points = anchor + t[:, None] * axis
         return points[inside(points)], float(t[1] - t[0])
     e1, e2 = perpendicular_basis(axis)
 
     def on_cylinder(ta):
         angle = ta[:, 1]
-        return feature.point + ta[:, :1] * axis + feature.radius * (
+        return anchor + ta[:, :1] * axis + radius * (
             np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2)
 
     if t is None:
@@ -139,16 +139,16 @@ def patch_size(feature) -> PatchSize:
     they never fall short of the patch.
     """
     points, spacing = _patch(feature)
-    if feature.kind == "plane":
+    core, anchor, axis, _ = feature.core()
+    if core == "plane":
         centre = points.mean(axis=0)
-        e1, e2 = perpendicular_basis(feature.normal)
+        e1, e2 = perpendicular_basis(axis)
         uv = np.stack([(points - centre) @ e1, (points - centre) @ e2], axis=1)
         _, _, vt = np.linalg.svd(uv - uv.mean(0), full_matrices=False)
         directions = vt @ np.stack([e1, e2])
         reach = np.abs((points - centre) @ directions.T).max(axis=0) + spacing
         return PatchSize(centre, directions, reach)
-    axis = feature.axis if feature.kind == "cylinder" else feature.direction
-    t = (points - feature.point) @ axis
-    centre = feature.point + 0.5 * (t.min() + t.max()) * axis
+    t = (points - anchor) @ axis
+    centre = anchor + 0.5 * (t.min() + t.max()) * axis
     half = 0.5 * (t.max() - t.min()) + spacing
     return PatchSize(centre, np.stack(perpendicular_basis(axis)), np.array([half, half]))

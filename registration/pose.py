@@ -11,6 +11,8 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
+from .elements import perpendicular_basis
+
 ORTHONORMAL_TOLERANCE = 1e-6  # largest |R^T R - I| entry accepted in a given 4x4
 
 
@@ -143,7 +145,5 @@ def rotation_aligning(a, b):
     if s < 1e-12:
         if c > 0:
             return np.eye(3)
-        helper = np.eye(3)[int(np.argmin(np.abs(a)))]
-        axis = np.cross(a, helper)
-        return rotation_from_vector(np.pi * axis / np.linalg.norm(axis))
+        return rotation_from_vector(np.pi * perpendicular_basis(a)[0])
     return rotation_from_vector(np.arctan2(s, c) * axis / s)

@@ -12,6 +12,7 @@ import numpy as np
 from .defaults import SENSOR_LEVER_MM
 from .synthetic import perturb_touches, plan_touches
 from .deviations import entry_on
+from .elements import element
 from .features import feature_from_json
 from .tolerance import coordinates, modes
 from .pose import fixture2meas_from_rt, random_rotation
@@ -96,7 +97,7 @@ class TouchSampler:
         self.faces = {}
         for entry in self.entries:
             feature = self.drawing[entry["feature"]]
-            if "sensor" not in entry and feature.kind in ("plane", "sphere", "cylinder"):
+            if "sensor" not in entry and element(feature.kind).surface:
                 faces = feature_faces(mesh, feature)
                 if not len(faces):
                     raise ValueError(f"no STL triangles found on feature {feature.id}")

@@ -44,7 +44,7 @@ class TouchGroup:
 def fixture_side(feature, fixed: bool, **extra):
     """The contact-model side of a feature in the fixture frame (a point is always fixed, at itself)."""
     el = element(feature.kind)
-    geometry = el.side_geometry({key: getattr(feature, key) for key in el.json_keys})
+    geometry = el.side_geometry(feature)
     if el.letter == "P":
         fixed, geometry["o"] = True, feature.point
     return make_side(el.letter, fixed, **geometry, **extra)
@@ -59,8 +59,8 @@ def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
     if ball_radius_mm > 0.0:
         ctype = ContactType("S", False, fixture_element, fixture_fixed)
         sensor = make_side("S", False, c=points, r=np.full(n, ball_radius_mm))
-        offset = {"plane": ball_radius_mm, "line": ball_radius_mm, "point": 0.0}
-        rho = offset.get(feature.kind, getattr(feature, "radius", 0.0) + ball_radius_mm)
+        # The ball's centre keeps off the feature's core by both radii (a point's row needs none).
+        rho = 0.0 if fixture_fixed else ball_radius_mm + feature.core()[3]
     else:
         ctype = ContactType("P", True, fixture_element, fixture_fixed)
         sensor = make_side("P", True, c=points, o=points)
@@ -116,11 +116,11 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
     geometry = {key: value[None] for key, value in sensor_geometry(ctype, sensor, contact_point).items()}
     side = make_side(ctype.sensor, ctype.sensor_fixed, **geometry)
     extra = {key: np.asarray(value, dtype=np.float64) for key, value in (fixture or {}).items()}
-    if ctype.fixture_fixed and "o" in extra and "u" not in extra and feature.kind in ("plane", "sphere", "cylinder"):
+    if ctype.fixture_fixed and "o" in extra and "u" not in extra and element(feature.kind).surface:
         extra["u"] = feature.normal_at(extra["o"])[0]
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
     if rho is None:
-        rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(getattr(feature, "radius", 0.0))
+        rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(feature.core()[3])
     centre = placement_centre(ctype.sensor, geometry, None if contact_point is None else np.reshape(contact_point, (1, 3)))
     return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre)
 

@@ -108,7 +108,9 @@ def test_one_element_table():
     from fixturecad.registration.touches import fixture_side
 
     schema = json.loads((Path(__file__).parent.parent / "fixturecad" / "schema" / "features.schema.json").read_text())
-    kinds = {schema["$defs"][kind]["properties"]["kind"]["const"] for kind in KINDS}
+    # The kinds a features.json may hold, read from the schema's list of feature entries.
+    entries = [schema["$defs"][ref["$ref"].split("/")[-1]] for ref in schema["properties"]["features"]["items"]["oneOf"]]
+    kinds = {entry["properties"]["kind"]["const"] for entry in entries}
     assert kinds == set(KINDS) == set(FEATURE_CLASSES)
     for e in ELEMENTS:
         assert schema["$defs"][e.kind]["properties"]["element"]["const"] == e.letter
@@ -136,3 +138,25 @@ def test_distances_are_the_contact_rows():
         rows, _ = residuals_and_jacobian(ctype, make_side("P", True, c=points, o=points),
                                          fixture_side(feature, False), np.eye(3), np.zeros(3))
         assert np.allclose(rows[:, 0], feature.signed_distance(points), atol=1e-12)
+
+
+def test_ball_tip_rows_are_the_distance_less_both_radii():
+    """A ball tip's row (two mobile elements) is the distance from the feature's core less the feature's
+    and the ball's radii, against the distances written out for a plane, a sphere and a cylinder."""
+    from fixturecad.registration.contacts import residuals_and_jacobian
+    from fixturecad.registration.touches import point_touches
+
+    rng = np.random.default_rng(RNG_SEED)
+    centres = rng.uniform(-30, 30, size=(20, 3))
+    ball_mm = 1.5
+    q, n = np.array([1.0, 2.0, 3.0]), np.array([0.0, 0.6, 0.8])
+    axial = (centres - q) - np.outer((centres - q) @ n, n)
+    expected = {
+        "plane": (centres - q) @ n - ball_mm,
+        "sphere": np.linalg.norm(centres - q, axis=1) - 7.0 - ball_mm,
+        "cylinder": np.linalg.norm(axial, axis=1) - 5.0 - ball_mm,
+    }
+    for feature in (Plane("p", q, n), Sphere("s", q, 7.0), Cylinder("c", q, n, 5.0)):
+        group = point_touches(feature, centres, np.arange(len(centres)), ball_mm)
+        rows, _ = residuals_and_jacobian(group.ctype, group.sensor, group.fixture, np.eye(3), np.zeros(3), group.rho)
+        assert np.allclose(rows[:, 0], expected[feature.kind], atol=1e-12)

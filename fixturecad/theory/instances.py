@@ -11,6 +11,7 @@ from itertools import combinations
 import numpy as np
 
 from fixturecad.registration.contacts import ContactType, Side, contact_rows, make_side, residuals_and_jacobian
+from fixturecad.registration.elements import CORE_WORDS, element
 
 
 @dataclass
@@ -73,22 +74,18 @@ def generic_instance(ctype: ContactType, rng: np.random.Generator) -> Instance:
     points, lines = {"the contact point": o}, {}
     geometry = {}
     for side in "AB":
-        kind, r, n_out = kinds[side], radii[side], outward[side]
+        # The element's core one radius inside its surface, along the outward normal.
+        el = element(kinds[side])
+        r = radii[side] if el.round else 0.0
+        anchor = o - r * outward[side] if el.round else o
+        values = {el.anchor_key: anchor, "d": dirs[side], "n": outward[side], "r": r}
+        geometry[side] = {key: values[key] for _, key in el.keys}
         who = labels[side]
-        if kind == "P":
-            g = {"c": o}
-        elif kind == "S":
-            g = {"c": o - r * n_out, "r": r}
-            points[f"the {who} sphere centre"] = g["c"]
-        elif kind == "C":
-            g = {"p": o - r * n_out, "d": dirs[side], "r": r}
-            lines[f"the {who} cylinder axis"] = (g["p"], g["d"])
-        elif kind == "L":
-            g = {"p": o, "d": dirs[side]}
-            lines[f"the {who} line"] = (o, dirs[side])
-        else:
-            g = {"q": o, "n": n_out}
-        geometry[side] = g
+        if el.core == "point" and el.round:
+            points[f"the {who} {el.kind} {CORE_WORDS[el.core]}"] = anchor
+        elif el.core == "line":
+            name = f"the {who} {el.kind} {CORE_WORDS[el.core]}" if el.round else f"the {who} line"
+            lines[name] = (anchor, dirs[side])
     rho = 0.0
     if ctype.is_locus:
         plane_side = "A" if kinds["A"] == "PL" else "B"
@@ -107,15 +104,15 @@ def generic_instance(ctype: ContactType, rng: np.random.Generator) -> Instance:
     for side in "AB":
         if fixed[side]:
             geometry[side]["o"] = o
-            if kinds[side] in ("S", "C", "PL"):
+            if element(kinds[side]).surface:
                 geometry[side]["u"] = outward[side]
     lines["the contact normal"] = (o, nz)
     sides = {side: make_side(kinds[side], fixed[side], **geometry[side]) for side in "AB"}
     if not ctype.is_locus:
         mobile_core = [s for s in "AB" if not fixed[s]]
         if len(mobile_core) == 1 and fixed["AB".replace(mobile_core[0], "")] and \
-                kinds["AB".replace(mobile_core[0], "")] in ("S", "C", "PL"):
-            rho = radii[mobile_core[0]] if kinds[mobile_core[0]] in ("S", "C") else 0.0
+                element(kinds["AB".replace(mobile_core[0], "")]).surface:
+            rho = radii[mobile_core[0]] if element(kinds[mobile_core[0]]).round else 0.0
         elif not fixed["A"] and not fixed["B"]:
             values, _ = contact_rows(ctype, sides["A"], sides["B"], 0.0)
             rho = float(values[0])
