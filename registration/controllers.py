@@ -75,10 +75,11 @@ def zyx_from_rotation(rotation):
     R = np.asarray(rotation, float)
     if np.hypot(R[0, 0], R[1, 0]) > GIMBAL_LOCK_COS:
         a = np.arctan2(R[1, 0], R[0, 0])
-    else:
-        a = np.arctan2(-R[0, 1], R[1, 1])
+        M = _rz(a).T @ R
+        return np.array([a, np.arctan2(-M[2, 0], M[0, 0]), np.arctan2(-M[1, 2], M[1, 1])])
+    a = np.arctan2(-R[0, 1], R[1, 1])
     M = _rz(a).T @ R
-    return np.array([a, np.arctan2(-M[2, 0], M[0, 0]), np.arctan2(-M[1, 2], M[1, 1])])
+    return np.array([a, np.copysign(np.pi / 2, -M[2, 0]), np.arctan2(-M[1, 2], M[1, 1])])
 
 
 def rotation_from_zyx(angles_rad):
@@ -318,7 +319,8 @@ def _json_text(convention, values, sigmas, frames):
         "sigma": None if sigmas is None else {"translation_mm": sigmas[:3].tolist(),
                                              "quaternion_wxyz": sigmas[3:].tolist()},
     }
-    return json.dumps(document, indent=2)
+    # One key a line, each value on its line: readable, and still one JSON object.
+    return "{\n" + ",\n".join(f"  {json.dumps(key)}: {json.dumps(value)}" for key, value in document.items()) + "\n}"
 
 
 def _kuka_text(convention, values, frames):
