@@ -287,8 +287,7 @@ def _number(value, unit):
 
 
 def _labelled(convention, values):
-    return ", ".join(f"{label} {_number(v, unit)}" for label, v, unit in
-                     zip(convention.labels, values, convention.units()))
+    return ", ".join(f"{label} {n}" for label, n in zip(convention.labels, _numbers(convention, values)))
 
 
 def _sigma_line(convention, sigmas):
@@ -306,18 +305,23 @@ def _matrix_text(convention, values, frames):
     return [" ".join(n[3 + 3 * i:6 + 3 * i] + [n[i]]) for i in range(3)] + ["0.0 0.0 0.0 1.0"], []
 
 
-def _json_text(convention, values, sigmas, frames):
-    """JSON has no comments: the convention is a key of the object, the sigmas another."""
+def _json_text(convention, fixture2meas, values, sigmas, frames):
+    """JSON has no comments: the convention is a key of the object, the sigmas another.
+
+    Numbers carry the same decimals as the other formats, the sigmas 3 significant digits.
+    """
     parent, child = frames
+    T = np.asarray(fixture2meas, dtype=np.float64)
+    n = [float(x) for x in _numbers(convention, values)]
     document = {
         "convention": convention.header.format(parent=parent, child=child),
         "frame_id": parent,
         "child_frame_id": child,
-        f"{child}2{parent}": pose_from_format("json", values).tolist(),
-        "translation_mm": values[:3].tolist(),
-        "quaternion_wxyz": values[3:].tolist(),
-        "sigma": None if sigmas is None else {"translation_mm": sigmas[:3].tolist(),
-                                             "quaternion_wxyz": sigmas[3:].tolist()},
+        f"{child}2{parent}": [[float(_number(x, "" if j < 3 else "mm")) for j, x in enumerate(row)] for row in T],
+        "translation_mm": n[:3],
+        "quaternion_wxyz": n[3:],
+        "sigma": None if sigmas is None else {"translation_mm": [float(f"{x:.3g}") for x in sigmas[:3]],
+                                             "quaternion_wxyz": [float(f"{x:.3g}") for x in sigmas[3:]]},
     }
     # One key a line, each value on its line: readable, and still one JSON object.
     return "{\n" + ",\n".join(f"  {json.dumps(key)}: {json.dumps(value)}" for key, value in document.items()) + "\n}"
@@ -371,7 +375,7 @@ def format_pose(name, fixture2meas, covariance=None, frame_names=("meas", "fixtu
     sigmas = None if covariance is None else sigmas_from_covariance(name, fixture2meas, covariance)
     parent, child = frame_names
     if name == "json":
-        return _json_text(convention, values, sigmas, (parent, child))
+        return _json_text(convention, fixture2meas, values, sigmas, (parent, child))
     pose_lines, trailer = _WRITERS[name](convention, values, (parent, child))
     lines = [f"{convention.comment} " + convention.header.format(parent=parent, child=child)] + pose_lines
     if sigmas is not None:

@@ -273,8 +273,8 @@ def test_every_format_names_its_convention_first():
             assert "translation mm" in json.loads(text)["convention"]
         else:
             comment = controllers.CONVENTIONS[name].comment
-            assert text.splitlines()[0].startswith(comment + " ") and " mm" in text.splitlines()[0] or \
-                " m;" in text.splitlines()[0]
+            first = text.splitlines()[0]
+            assert first.startswith(comment + " ") and (" mm" in first or " m;" in first)
             assert text.splitlines()[-1 if name != "ros" else 2].startswith(comment + " sigma:")
 
 
