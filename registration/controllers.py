@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .pose import check_fixture2meas, fixture2meas_from_rt, rotation_from_vector
+from .pose import check_fixture2meas, fixture2meas_from_rt, rotation_from_quaternion, rotation_from_vector
 
 GIMBAL_LOCK_COS = 1e-10  # cos of the middle Euler angle below which it is +-90 deg and the third angle is set to 0
 GIMBAL_SIGMA_COS = 1e-5  # below this the first and third angles have no first-order sigma: reported as inf
@@ -109,22 +109,6 @@ def quaternion_from_rotation(rotation):
         first = q[1:][np.abs(q[1:]) > HALF_TURN_W][0]
         return q if first > 0 else np.array([0.0, *-q[1:]])
     return q if q[0] > 0 else -q
-
-
-def rotation_from_quaternion(quaternion_wxyz):
-    """Rotation matrix of a quaternion (w, x, y, z), normalised first; ValueError if it is zero."""
-    q = np.asarray(quaternion_wxyz, float)
-    norm = np.linalg.norm(q)
-    if not norm > 0:
-        raise ValueError(f"a quaternion must be non-zero, got {q.tolist()}")
-    w, x, y, z = q / norm
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 def rotvec_from_rotation(rotation):

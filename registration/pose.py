@@ -121,11 +121,13 @@ def pose_errors(fixture2meas_est, fixture2meas_true):
     return dt, dr
 
 
-def random_rotation(rng):
-    """A rotation drawn uniformly (Haar) with a ``numpy.random.Generator``."""
-    q = rng.normal(size=4)
-    q /= np.linalg.norm(q)
-    w, x, y, z = q
+def rotation_from_quaternion(quaternion_wxyz):
+    """Rotation matrix of a quaternion (w, x, y, z), normalised first; ValueError if it is zero."""
+    q = np.asarray(quaternion_wxyz, float)
+    norm = np.linalg.norm(q)
+    if not norm > 0:
+        raise ValueError(f"a quaternion must be non-zero, got {q.tolist()}")
+    w, x, y, z = q / norm
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -133,6 +135,11 @@ def random_rotation(rng):
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def random_rotation(rng):
+    """A rotation drawn uniformly (Haar) with a ``numpy.random.Generator``."""
+    return rotation_from_quaternion(rng.normal(size=4))
 
 
 def rotation_aligning(a, b):
