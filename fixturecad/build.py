@@ -1,26 +1,26 @@
 """``fixturecad build``: one template instance to fixture.step, fixture.stl, features.json, preview.png.
 
 Everything is written into a temporary folder beside the target and moved into
-place only when complete, so a failed or interrupted build leaves nothing
-behind and an existing folder is replaced only with ``force``.
+place only when complete (:mod:`fixturecad.staging`), so a failed or
+interrupted build leaves nothing behind and an existing folder is replaced
+only with ``force``, only if fixturecad wrote it.
 """
 
 import math
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from fixturecad import features_json
 from fixturecad.errors import InputError
 from fixturecad.registration.defaults import DEFAULT_ZONE_MM
+from fixturecad.staging import staged_folder
 
 if TYPE_CHECKING:
     from fixturecad.templates.base import Template
 
 FILES = {"step": "fixture.step", "stl": "fixture.stl", "features": "features.json",
-         "preview": "preview.png", "register": "register.py", "touches": "touches.template.csv"}
+         "preview": "preview.png", "register": "register.py", "touches": "touches.template.csv",
+         "touches_json": "touches.template.json"}
 # Relative agreement required between the BREP volume and the analytic one.
 VOLUME_RELATIVE_TOLERANCE = 1e-6
 # Chord tolerance of the STL tessellation unless asked otherwise, and the accepted range, mm.
@@ -60,6 +60,16 @@ def touch_template(template: "Template") -> str:
     return touch_csv(plans[name].touches, name)
 
 
+def touch_template_json(template: "Template") -> str:
+    """touches.template.json: the default plan's touches, sensors included, at their nominal places."""
+    import numpy as np
+
+    from fixturecad.registration.synthetic import plan_touches
+    from fixturecad.registration.touchfile import touch_json
+
+    return touch_json(*plan_touches(template.touch_plans()["default"].touches, np.eye(4)))
+
+
 def default_target(template: "Template", out_root: Path | None = None) -> Path:
     """``out/<template>-<short parameters>`` under the current directory (or ``out_root``)."""
     return (Path("out") if out_root is None else Path(out_root)) / template.slug()
@@ -67,26 +77,20 @@ def default_target(template: "Template", out_root: Path | None = None) -> Path:
 
 def build(template: "Template", target: Path, force: bool = False,
           stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM, fixture_tolerance: float = DEFAULT_ZONE_MM) -> Path:
-    """Write the fixture folder ``target``; return it. InputError if it exists and not ``force``."""
+    """Write the fixture folder ``target``; return it. InputError if it exists and not ``force``
+    (see :mod:`fixturecad.staging`)."""
     from fixturecad.sideprocess import SideProcess
 
     check_stl_tolerance(stl_tolerance)
     check_fixture_tolerance(fixture_tolerance)
-    target = Path(target)
-    if target.exists() and not force:
-        raise InputError(f"{target} already exists; pass --force to replace it")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
-    staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
-    side = SideProcess("preview", "register")  # imports matplotlib and scipy while we import cadquery
-    try:
-        _write_all(template, staging, stl_tolerance, fixture_tolerance, side)
-        _move_into_place(staging, target)
-    except BaseException:
-        side.cancel()
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return target
+    with staged_folder(target, force) as staging:
+        side = SideProcess("preview", "register")  # imports matplotlib and scipy while we import cadquery
+        try:
+            _write_all(template, staging, stl_tolerance, fixture_tolerance, side)
+        except BaseException:
+            side.cancel()
+            raise
+    return Path(target)
 
 
 def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture_tolerance: float, side) -> None:
@@ -115,20 +119,5 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
     export(shape, folder / FILES["step"])
     export(shape, folder / FILES["stl"], stl_tolerance, template.slug())
     (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")
+    (folder / FILES["touches_json"]).write_text(touch_template_json(template), encoding="utf-8")
     side.wait()
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _move_into_place(staging: Path, target: Path) -> None:
-    if target.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent))
-        os.replace(target, old / target.name)
-        os.replace(staging, target)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(staging, target)

@@ -10,6 +10,7 @@ import typer
 from fixturecad import features_json
 from fixturecad.errors import InputError
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM
+from fixturecad.staging import staged_folder
 
 app = typer.Typer()
 
@@ -116,23 +117,12 @@ def format_report(calibration: dict, zone_mm: float) -> str:
 
 
 def _write(out_dir: Path, target: Path, document: dict, zone_mm: float, force: bool, side) -> None:
-    """The as-built folder, written beside the target and moved into place when complete."""
-    if target.exists() and not force:
-        raise InputError(f"{target} already exists; pass --force to replace it")
-    staging = target.with_name(f".{target.name}.calibrating")
-    shutil.rmtree(staging, ignore_errors=True)
-    staging.mkdir(parents=True)
-    try:
+    """The as-built folder, written beside the target and moved into place when complete (the caller cancels
+    the side process on failure)."""
+    with staged_folder(target, force) as staging:
         for name in COPIED:
             if (out_dir / name).is_file():
                 shutil.copy2(out_dir / name, staging / name)
         features_json.write(document, staging / features_json.NAME)
         side.send(("calibration", document, zone_mm, staging / REPORT_NAME), ("register", document, staging / "register.py"))
         side.wait()
-        if target.exists():
-            shutil.rmtree(target)
-        staging.rename(target)
-    except BaseException:
-        side.cancel()
-        shutil.rmtree(staging, ignore_errors=True)
-        raise

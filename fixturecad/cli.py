@@ -6,8 +6,12 @@ that need them, so ``fixturecad --help`` and the theory commands start fast.
 """
 
 import sys
+import warnings
+from typing import Annotated
 
 import typer
+
+from fixturecad import __version__
 
 from fixturecad.calibration_commands import app as calibration_app
 from fixturecad.errors import InputError
@@ -26,6 +30,20 @@ for group in (theory_app, fixture_app, registration_app, calibration_app):
     app.add_typer(group)
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        typer.echo(f"fixturecad {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: Annotated[bool, typer.Option("--version", callback=_print_version, is_eager=True,
+                                          help="Print the version and exit.")] = False,
+):
+    """Design, build and register touch-sensing reference fixtures."""
+
+
 def fail(message: str) -> None:
     """Print one line on stderr and exit with code 2."""
     print(f"fixturecad: error: {message}", file=sys.stderr)
@@ -35,13 +53,18 @@ def fail(message: str) -> None:
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: usage errors and bad input are one line, exit 2."""
     command = typer.main.get_command(app)
+    warnings.simplefilter("ignore")  # a user sees results and one-line errors, never Python warnings
     try:
         code = command.main(args=argv, prog_name="fixturecad", standalone_mode=False)
     except InputError as error:
         fail(str(error))
     except (typer.Abort, KeyboardInterrupt):
-        fail("aborted")
+        # Ctrl-C outside a folder being written (fixturecad.staging handles those): nothing was written.
+        print("fixturecad: interrupted; nothing was written", file=sys.stderr)
+        raise SystemExit(130)
     except Exception as error:
+        if type(error).__name__ == "NoArgsIsHelpError":
+            raise SystemExit(0)  # the help is printed: no error to add
         # Typer's usage errors (unknown option, bad value, missing argument) carry exit code 2.
         if getattr(error, "exit_code", None) == 2 and hasattr(error, "format_message"):
             fail(" ".join(error.format_message().split()))

@@ -19,6 +19,7 @@ from fixturecad.output import Format, render
 app = typer.Typer()
 
 FormatOption = Annotated[Format, typer.Option("--format", help="table, json, csv or md.")]
+MAX_CLASS_MEMBERS = 64  # bounds what a typed "x1000000000" can ask for
 CLASS_TOKEN = re.compile(r"\{([A-Z0-9-]+)\}(?:\s*[x*]\s*(\d+))?")
 
 
@@ -46,12 +47,23 @@ def parse_template_options(template_name: str, args: list[str]) -> dict:
     return values
 
 
-@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+def template_parameters() -> str:
+    """Each template's parameters with units, defaults and ranges: the epilog of ``build --help``."""
+    from fixturecad.templates import TEMPLATES
+
+    lines = ["Templates and their parameters (default, range):"]
+    for cls in TEMPLATES.values():
+        lines.append(f"{cls.name}: " + ", ".join(f"--{p.name} {p.default:g} {p.unit} ({p.minimum:g}..{p.maximum:g})"
+                                                 for p in cls.PARAMS))
+    return "\n\n".join(lines)
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True}, epilog=template_parameters())
 def build(
     ctx: typer.Context,
     template: Annotated[str, typer.Argument(help="Template name (see `fixturecad templates`).")],
-    out: Annotated[Path | None, typer.Option(help="Output folder [default: out/<template>-<parameters>].")] = None,
-    force: Annotated[bool, typer.Option(help="Replace the output folder if it exists.")] = False,
+    out: Annotated[Path | None, typer.Option(help="Output folder.", show_default="out/<template>-<parameters>")] = None,
+    force: Annotated[bool, typer.Option(help="Replace the output folder if fixturecad wrote it.")] = False,
     base: Annotated[bool, typer.Option(help="Fuse a mounting base (stem and plate) onto a non-sensing face.")] = False,
     stl_tolerance: Annotated[float, typer.Option(
         help=f"STL chord tolerance, mm ({STL_TOLERANCE_RANGE_MM[0]:g} .. {STL_TOLERANCE_RANGE_MM[1]:g}).")
@@ -116,7 +128,11 @@ def class_members(text: str) -> tuple:
     for match in CLASS_TOKEN.finditer(cleaned):
         if cleaned[position : match.start()].strip():
             break
-        members += [match.group(1)] * int(match.group(2) or 1)
+        count = int(match.group(2) or 1)
+        if len(members) + count > MAX_CLASS_MEMBERS:
+            raise InputError(f"class {text!r} has more than {MAX_CLASS_MEMBERS} contacts; "
+                             "a locating combination needs at most 6 (Table V), a plan a few more")
+        members += [match.group(1)] * count
         position = match.end()
     if not members or cleaned[position:].strip():
         raise InputError(f"cannot read class {text!r}: write it like {{G3}}{{S-S}}{{S-T2}}{{C-R-C}} or {{S-C}}x3{{S-T2}}x3")

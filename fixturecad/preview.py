@@ -12,6 +12,7 @@ INERT_COLOUR = "#c8c8c8"
 TOUCH_COLOUR = "#111111"
 SENSOR_COLOUR = "#444444"
 SUBDIVISION = 15  # triangles longer than size / this are split, so depth sorting works on big flat faces
+FRAME_AXIS_FRACTION = 0.3  # length of the drawn frame axes, as a fraction of the half size of the view
 VIEWS = ((28.0, -60.0), (-28.0, 120.0))  # (elevation, azimuth) deg: front-top and back-bottom
 
 
@@ -47,29 +48,31 @@ def fixture_scene(template, features, matches: dict, parts) -> dict:
         faces.append((nodes, triangles, face_owner.get(index)))
     plan = template.touch_plans()["default"]
     touches, number = [], 0
-    anchors = {}
     by_id = {feature.id: feature for feature in features}
     for entry in plan.touches:
         for point in entry["points"]:
             number += 1
             normal = _label_normal(by_id[entry["feature"]], np.array(point), features)
-            touches.append({"point": np.array(point), "normal": normal, "label": str(number),
+            touches.append({"point": np.array(point), "normal": normal, "label": str(number), "feature": entry["feature"],
                             "text": f"{number:>2} {entry['contact']:<10} {entry['feature']}"})
-            anchors.setdefault(entry["feature"], []).append(point)
     feature_rows = []
     for feature in features:
         segment = None
         if feature.kind == "line":
             t0, t1 = feature.extent.interval
             segment = np.array([feature.point + t0 * feature.direction, feature.point + t1 * feature.direction])
-        if feature.id in anchors:
-            anchor = np.mean(anchors[feature.id], axis=0)
+        if segment is not None:
+            nodes = segment[0] + np.linspace(0.1, 0.9, 9)[:, None] * (segment[1] - segment[0])
         else:
             nodes = np.vstack([parts[i][1] for i in matches[feature.id] if i < len(parts)] or [feature.point])
-            anchor = nodes.mean(axis=0)
-        if feature.kind != "line":
-            anchor = anchor + 0.08 * _span(parts) * feature.normal_at(anchor)[0]
+        # keep labels off the touch markers and the frame's axes
+        frame = [k * FRAME_AXIS_FRACTION * _span(parts) / 2 * axis for axis in np.eye(3) for k in (0.0, 0.5, 1.0)]
+        anchor = _label_place(nodes, [t["point"] for t in touches] + frame, 0.22 * _span(parts))
+        if anchor is None:  # a small feature crowded with touches: above their middle
+            anchor = np.mean([t["point"] for t in touches if t["feature"] == feature.id] or nodes, axis=0)
         normal = _label_normal(feature, anchor, features)
+        if normal is not None:  # off the surface, or off a line along the faces' mean normal
+            anchor = anchor + 0.08 * _span(parts) * normal
         feature_rows.append({"id": feature.id, "kind": feature.kind, "element": feature.element,
                              "anchor": anchor, "normal": normal, "segment": segment})
     parameters = ", ".join(f"{k} {v:g}" for k, v in template.parameters_json().items() if k != "base")
@@ -80,6 +83,20 @@ def fixture_scene(template, features, matches: dict, parts) -> dict:
     sensors = [{**_sensor_drawing(entry["sensor"], 0.35 * _span(parts)), "normal": label_normals[entry["feature"]]}
                for entry in plan.touches if "sensor" in entry]
     return scene(title, faces, feature_rows, touches, views, sensors)
+
+
+def _label_place(nodes, touch_points, clearance):
+    """Where a feature's label goes: the node nearest the feature's centre among those at least
+    ``clearance`` mm from every touch; None when none is."""
+    nodes = np.asarray(nodes, dtype=float)
+    if not len(touch_points):
+        return nodes.mean(axis=0)
+    away = np.linalg.norm(nodes[:, None, :] - np.asarray(touch_points)[None], axis=2).min(axis=1)
+    clear = away >= clearance
+    if not clear.any():
+        return None
+    candidates = nodes[clear]
+    return candidates[int(np.argmin(np.linalg.norm(candidates - nodes.mean(axis=0), axis=1)))]
 
 
 def _sensor_drawing(sensor: dict, size: float) -> dict:
@@ -160,8 +177,9 @@ def render(data: dict, path) -> None:
             anchor = np.asarray(feature["anchor"])
             if not seen(feature.get("normal")):
                 continue
-            ax.text(*anchor, f" {feature['id']} ({feature['element']})", color=colours[feature["id"]],
-                    fontsize=9, fontweight="bold", zorder=10)
+            ax.text(*anchor, f"{feature['id']} ({feature['element']})", color=colours[feature["id"]],
+                    fontsize=9, fontweight="bold", ha="center", zorder=10,
+                    bbox={"facecolor": "white", "alpha": 0.75, "edgecolor": "none", "pad": 1.0})
         for sensor in data.get("sensors", []):
             if not seen(sensor.get("normal")):
                 continue
@@ -177,6 +195,7 @@ def render(data: dict, path) -> None:
             ax.scatter(points[:, 0], points[:, 1], points[:, 2], color=TOUCH_COLOUR, s=26, depthshade=False, zorder=20)
             for touch in visible:
                 ax.text(*touch["point"], f" {touch['label']}", color=TOUCH_COLOUR, fontsize=9, fontweight="bold", zorder=21)
+        _frame_axes(ax, FRAME_AXIS_FRACTION * half)
         ax.set_xlim(centre[0] - half, centre[0] + half)
         ax.set_ylim(centre[1] - half, centre[1] + half)
         ax.set_zlim(centre[2] - half, centre[2] + half)
@@ -187,16 +206,27 @@ def render(data: dict, path) -> None:
         ax.view_init(elev=elev, azim=azim)
     handles = [Patch(color=colours[f["id"]], label=f"{f['id']}: {f['kind']} ({f['element']})") for f in data["features"]]
     handles.append(Line2D([], [], marker="o", linestyle="", color=TOUCH_COLOUR, label="touch of the default plan"))
+    handles.append(Line2D([], [], marker="s", color="#d00000", markerfacecolor="black", markeredgecolor="black",
+                          label="fixture frame: origin, X Y Z"))
     if data.get("sensors"):
         handles.append(Line2D([], [], linestyle="--", color=SENSOR_COLOUR, label="plane / line sensor"))
     if data["touches"]:
         listing = "default touch plan\n" + "\n".join(t["text"] for t in data["touches"])
         figure.text(0.5, 0.88, listing, ha="center", va="top", multialignment="left", fontsize=8, family="monospace",
                     bbox={"facecolor": "white", "edgecolor": "#888888", "alpha": 0.85})
-    figure.legend(handles=handles, loc="lower center", ncol=min(len(handles), 6), fontsize=9, frameon=False)
+    figure.legend(handles=handles, loc="lower center", ncol=(len(handles) + 1) // 2, fontsize=9, frameon=False)
     figure.suptitle(data["title"], fontsize=11)
     figure.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.1, wspace=0.05)
     figure.savefig(path)
+
+
+def _frame_axes(ax, length: float) -> None:
+    """The fixture frame: its origin and X, Y, Z axes (red, green, blue), drawn over the solid."""
+    for axis, colour in zip("XYZ", ("#d00000", "#00a000", "#0000d0")):
+        tip = length * np.eye(3)["XYZ".index(axis)]
+        ax.plot([0, tip[0]], [0, tip[1]], [0, tip[2]], color=colour, linewidth=2.5, zorder=30)
+        ax.text(*(1.12 * tip), axis, color=colour, fontsize=9, fontweight="bold", ha="center", va="center", zorder=31)
+    ax.scatter([0], [0], [0], color="black", marker="s", s=18, depthshade=False, zorder=31)
 
 
 def _subdivide(tris, max_edge: float, levels: int = 5):

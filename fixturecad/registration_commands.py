@@ -9,6 +9,8 @@ import typer
 
 from fixturecad import features_json
 from fixturecad.errors import InputError
+from fixturecad.staging import check_files, staged_file
+from fixturecad.registration.controllers import FORMATS
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 
 app = typer.Typer()
@@ -37,42 +39,43 @@ def load_routine(out_dir: Path):
     name = f"_fixturecad_generated_{abs(hash(str(path.resolve())))}"
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as error:  # whatever a damaged file raises, the user's remedy is the same
+        raise InputError(f"{path} is damaged ({type(error).__name__}): rebuild the fixture") from None
+    if not all(hasattr(module, name) for name in ("FEATURES", "register")):
+        raise InputError(f"{path} is not a fixturecad registration routine: rebuild the fixture")
     return module
+
+
+PoseFormat = Enum("PoseFormat", {name: name for name in FORMATS}, type=str)
 
 
 @app.command()
 def register(
     out_dir: Annotated[Path, typer.Argument(help="Fixture folder written by fixturecad build.")],
-    touches: Annotated[Path, typer.Argument(help="Touch file: CSV feature,x,y,z (mm, measurement frame) or JSON.")],
+    touches: Annotated[Path, typer.Argument(help="Touch file: CSV feature,x,y,z (mm, measurement frame) or JSON (docs/touch-files.md).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
+    pose_format: Annotated[PoseFormat, typer.Option("--format", help="The pose in a robot controller's convention and units (docs/robot-frames.md).")] = PoseFormat.matrix,
     sigma: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
-    lever: Annotated[float | None, typer.Option(help=f"Sensor size, mm: plane and line sensors tilt by sigma/lever rad (default {SENSOR_LEVER_MM:g} mm).")] = None,
-    ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres).")] = None,
+    lever: Annotated[float, typer.Option(help="Sensor size, mm: plane and line sensors tilt by sigma/lever rad.")] = SENSOR_LEVER_MM,
+    ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres; default: as the touch file says, a CSV 0).")] = None,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
 ):
     """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py.
 
     Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 2 bad input.
     """
-    from fixturecad.registration.touchfile import EXIT_CODES, check_enough, format_result, read_touch_file
+    from fixturecad.registration.touchfile import EXIT_CODES, register_file, report
 
     if not Path(out_dir).is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
-    if not (sigma > 0 and sigma < float("inf")):
-        raise InputError(f"--sigma must be a positive number of mm, got {sigma}")
-    lever = _lever(lever)
-    _check_tolerance(fixture_tolerance)
     routine = load_routine(out_dir)
     try:
-        points, contacts, radius, approaches = read_touch_file(touches, list(routine.FEATURES))
-        radius = radius if ball_radius is None else ball_radius
-        check_enough(routine.FEATURES, points, contacts, radius)
-        result = routine.register(points, sigma_mm=sigma, ball_radius_mm=radius, contacts=contacts,
-                                  approaches=approaches, lever_mm=lever, fixture_tolerance_mm=fixture_tolerance)
+        result = register_file(routine.FEATURES, routine.register, touches, sigma, lever, ball_radius, fixture_tolerance)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
-    typer.echo(json.dumps(result, indent=2) if as_json else format_result(result))
+    typer.echo(report(result, pose_format.value, as_json))
     raise typer.Exit(EXIT_CODES[result["status"]])
 
 
@@ -81,12 +84,14 @@ def simulate(
     out_dir: Annotated[Path, typer.Argument(help="Fixture folder written by fixturecad build.")],
     trials: Annotated[int, typer.Option(help="Number of simulated registrations.")] = 1000,
     noise: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
-    lever: Annotated[float | None, typer.Option(help=f"Sensor size, mm: plane and line sensors tilt by noise/lever rad (default {SENSOR_LEVER_MM:g} mm).")] = None,
+    lever: Annotated[float, typer.Option(help="Sensor size, mm: plane and line sensors tilt by noise/lever rad.")] = SENSOR_LEVER_MM,
     plan: Annotated[Positions, typer.Option(help="Touch positions: the plan's nominal points or random ones on the same features.")] = Positions.default,
     touch_plan: Annotated[str, typer.Option(help="Named touch plan of features.json.")] = "default",
-    seed: Annotated[int, typer.Option(help="Seed of the random generator.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the random generator (0 or more).")] = 0,
     nominal: Annotated[bool, typer.Option(help="Give the routine a nominal pose (1 deg, 1 mm off the truth).")] = False,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Print the fixture within a profile tolerance zone this wide, mm (default: as recorded in features.json; 0: an exact part).")] = None,
+    out: Annotated[Path | None, typer.Option(help=f"Folder for {SUMMARY_NAME} and {PLOT_NAME} [default: the fixture folder].")] = None,
+    force: Annotated[bool, typer.Option(help=f"Replace {SUMMARY_NAME} and {PLOT_NAME} written earlier.")] = False,
 ):
     """Register synthetic noisy touches sampled on the STL; compare the errors with the Cramer-Rao bound.
 
@@ -104,7 +109,8 @@ def simulate(
         raise InputError(f"--trials must be at least 1, got {trials}")
     if not (noise >= 0 and noise < float("inf")):
         raise InputError(f"--noise must be a non-negative number of mm, got {noise}")
-    lever = _lever(lever)
+    if not (lever > 0 and lever < float("inf")):
+        raise InputError(f"--lever must be a positive number of mm, got {lever}")
     _check_tolerance(fixture_tolerance)
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
@@ -114,9 +120,11 @@ def simulate(
     if not stl.is_file():
         raise InputError(f"no fixture.stl in {out_dir}: run fixturecad build first")
     routine = load_routine(out_dir)
+    folder = check_files(out_dir if out is None else out, (SUMMARY_NAME, PLOT_NAME), force)
     try:
         tolerance = tolerance_from_document(features_from_json(document), document, fixture_tolerance)
-        sampler = TouchSampler(document, load_mesh(stl), touch_plan, plan is Positions.random, tolerance)
+        mesh = load_mesh(stl, document["volume_mm3"])
+        sampler = TouchSampler(document, mesh, touch_plan, plan is Positions.random, tolerance)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     rng = np.random.default_rng(seed)
@@ -131,19 +139,12 @@ def simulate(
     summary.update({"trials": trials, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,
                     "calibrated": tolerance is not None and "calibration" in document})
-    (out_dir / SUMMARY_NAME).write_text(json.dumps(summary, indent=2))
-    plot_errors(records, summary, out_dir / PLOT_NAME)
+    with staged_file(folder / SUMMARY_NAME) as path:
+        path.write_text(json.dumps(summary, indent=2))
+    with staged_file(folder / PLOT_NAME) as path:
+        plot_errors(records, summary, path)
     typer.echo(format_summary(summary))
-    typer.echo(f"plot: {out_dir / PLOT_NAME}")
-
-
-def _lever(lever):
-    """The sensor lever (mm) of --lever, the engine's default when not given."""
-    if lever is None:
-        return SENSOR_LEVER_MM
-    if not (lever > 0 and lever < float("inf")):
-        raise InputError(f"--lever must be a positive number of mm, got {lever}")
-    return lever
+    typer.echo(f"plot: {folder / PLOT_NAME}")
 
 
 def _progress_stream():

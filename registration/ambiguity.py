@@ -16,7 +16,8 @@ def robust_flag(problem, solution):
     """A touch whose removal makes the touches consistent, found by a Cauchy-weighted refit.
 
     The robust (Cauchy) fit ranks the touches by residual; the worst are left
-    out in turn. Returns (touch index, refit Solution, its residual mm) or None.
+    out in turn. Returns (touch index, refit Solution, its distance mm from its feature at the
+    refit pose) or None.
     """
     sigma = problem.sigma
     R, t = solution.rotation, solution.translation
@@ -35,7 +36,9 @@ def robust_flag(problem, solution):
             continue
         good = [s for s in solve(reduced) if s.passes and s.admissible and s.rank == 6]
         if good:
-            return touch, good[0], float(np.sqrt(per_touch[touch]))
+            # How far the touch is off at the refit pose (the robust fit's weights shrank its residual).
+            rows, _ = problem.sensor_rows(good[0].rotation, good[0].translation)
+            return touch, good[0], float(np.linalg.norm(rows[problem.row_touch == touch]))
     return None
 
 

@@ -71,8 +71,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         raise ValueError("no touches given")
     solutions = solve(problem, initial_pose)
     best = solutions[0]
-    result = {"flagged": [], "fixture_flagged": [], "free_motions": [], "separating_touch": None,
-              "inadmissible": best.outside}
+    result = {"flagged": [], "fixture_flagged": [], "free_motions": [], "separating_touch": None}
     good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
     if best.rank < 6:
         status = "underdetermined"
@@ -107,6 +106,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         {
             "pose": best.fixture2meas.tolist(),
             "status": status,
+            "inadmissible": sorted(best.outside),
             "rms_residual_mm": best.rms,
             "solutions": [{"pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms} for s in shown],
             "covariance": None if cov is None else cov.tolist(),

@@ -118,7 +118,10 @@ def free_motions(problem, solution, features=None):
     for g in problem.groups:
         if g.points is not None and g.count >= 2:
             local = (g.points - t) @ R
-            d = (local[-1] - local[0]) / np.linalg.norm(local[-1] - local[0])
+            span = np.linalg.norm(local - local[0], axis=1)
+            if span.max() < COLLINEAR_MM * max(length, 1.0):
+                continue  # the touches are one point: no line through them
+            d = (local[span.argmax()] - local[0]) / span.max()
             off = local - local[0] - np.outer((local - local[0]) @ d, d)
             if np.all(np.linalg.norm(off, axis=1) < COLLINEAR_MM * max(length, 1.0)):
                 touch_lines[f"the line through the touches on {g.feature.id}"] = (local[0], d)

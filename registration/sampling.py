@@ -22,10 +22,22 @@ NORMAL_AGREEMENT = 0.9  # cosine between a triangle normal and the feature norma
 POSE_TRANSLATION_RANGE_MM = 100.0  # random poses: translation uniform in +- this per axis
 
 
-def load_mesh(path):
+MESH_VOLUME_TOLERANCE = 0.01  # relative: the tessellation's chords change the volume by far less
+
+
+def load_mesh(path, volume_mm3=None):
+    """The fixture's STL; ValueError (one line) when it does not enclose the recorded volume (mm^3)."""
     import trimesh
 
-    return trimesh.load_mesh(str(path), process=False)
+    try:
+        mesh = trimesh.load_mesh(str(path), file_type="stl", process=False)
+    except Exception:  # trimesh raises many kinds on a damaged file
+        raise ValueError(f"{path} is damaged (not readable as STL): rebuild the fixture") from None
+    # A truncated file loses triangles: the enclosed volume tells (the unmerged mesh is never "watertight").
+    if not isinstance(mesh, trimesh.Trimesh) or not len(mesh.faces) or (
+            volume_mm3 is not None and not abs(mesh.volume - volume_mm3) <= MESH_VOLUME_TOLERANCE * volume_mm3):
+        raise ValueError(f"{path} is damaged (not a closed mesh of the fixture's volume): rebuild the fixture")
+    return mesh
 
 
 def plan_entries(document, plan="default"):

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contacts import ContactType, make_side
+from .defaults import MAX_COORDINATE_MM
 from .elements import element
 from .noise import placement_centre
 
@@ -87,7 +88,11 @@ def sensor_geometry(ctype, sensor, contact_point=None):
         geometry = {names[key]: np.asarray(value, dtype=np.float64) for key, value in sensor.items() if key in names}
         for key in ("n", "d"):
             if key in geometry:
-                geometry[key] = geometry[key] / np.linalg.norm(geometry[key])
+                length = np.linalg.norm(geometry[key])
+                if not length > 1e-9:
+                    raise ValueError(f"a {sensor['kind']} sensor's {dict(map(reversed, names.items()))[key]} "
+                                     f"must be a non-zero vector")
+                geometry[key] = geometry[key] / length
     if ctype.sensor_fixed and "o" not in geometry:
         if contact_point is None:
             if ctype.sensor != "P":
@@ -142,6 +147,8 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=
             raise ValueError(f"touches on {feature_id} must have shape (n, 3) in mm, got shape {pts.shape}")
         if not np.all(np.isfinite(pts)):
             raise ValueError(f"touches on {feature_id} must be finite, got NaN or inf")
+        if np.abs(pts).max(initial=0.0) > MAX_COORDINATE_MM:
+            raise ValueError(f"touches on {feature_id} lie beyond {MAX_COORDINATE_MM:g} mm: check the units")
         if len(pts) == 0:
             continue
         ids = np.arange(index, index + len(pts))

@@ -1,17 +1,19 @@
 """Touch files and the command line of the generated ``register.py``.
 
-A CSV touch file has the header ``feature,x,y,z``: one touch per line, the
+A CSV touch file has the header ``feature,x,y,z``: one touch per row, the
 feature id of features.json and the probe point (or ball centre) in mm in the
-measurement frame; lines starting with ``#`` and blank lines are skipped, and
-a UTF-8 byte order mark (Excel's "CSV UTF-8") is allowed. Three more columns ``ax,ay,az`` may give the direction the
-probe moved to make the touch; poses at which it would have touched a surface
-from inside are then rejected. A JSON touch file holds contacts of any type
-(a point touch may carry ``"approach": [ax, ay, az]``)::
+measurement frame; rows starting with ``#`` and blank rows are skipped, and a
+UTF-8 byte order mark (Excel's "CSV UTF-8") is allowed. Three more columns
+``ax,ay,az`` may give the direction the probe moved to make the touch; poses
+at which it would have touched a surface from inside are then rejected. A
+JSON touch file holds contacts of any type, in entries with the keys of the
+touch plans (schema ``fixturecad/schema/touches.schema.json``, examples in
+``docs/touch-files.md``)::
 
     {"ball_radius_mm": 0.0,
-     "touches": [{"feature": "flat_a", "point": [x, y, z]},
-                 {"feature": "base", "contact": "PL/F-PL/F",
-                  "sensor": {"q": [...], "n": [...], "o": [...], "u": [...]}, "rho": 0.0}]}
+     "touches": [{"feature": "flat_a", "points": [[x, y, z], ...]},
+                 {"feature": "base", "contact": "PL/F-PL/F", "points": [[x, y, z]],
+                  "sensor": {"kind": "plane", "point": [...], "normal": [...]}}]}
 
 Errors are ``ValueError`` with a one-line message. This module imports numpy
 only and nothing of fixturecad: it is inlined into the generated standalone
@@ -24,10 +26,13 @@ import io
 import json
 import os
 import sys
+import warnings
 
 import numpy as np
 
-from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
+from .contacts import ContactType
+from .elements import KINDS, element
 
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
@@ -38,7 +43,7 @@ EXIT_CODES = {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent":
 
 def read_touch_csv(text, feature_ids):
     """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
-    file line of every touch by feature id (lists)."""
+    file row (line number) of every touch by feature id (lists)."""
     text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8" starts with a byte order mark
     # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
     numbered = [(k, row) for k, row in enumerate(csv.reader(io.StringIO(text)), start=1)
@@ -55,14 +60,15 @@ def read_touch_csv(text, feature_ids):
     touches, approaches, lines = {}, {}, {}
     for line, row in numbered[1:]:
         if len(row) != width:
-            raise ValueError(f"line {line}: expected {width} values ({','.join(header)}), got {len(row)}")
-        _check_id(row[0].strip(), feature_ids, f"line {line}")
+            raise ValueError(f"row {line}: expected {width} values ({','.join(header)}), got {len(row)}")
+        _check_id(row[0].strip(), feature_ids, f"row {line}")
         try:
             values = [float(cell) for cell in row[1:]]
         except ValueError:
-            raise ValueError(f"line {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
+            raise ValueError(f"row {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
         if not np.all(np.isfinite(values)):
-            raise ValueError(f"line {line}: coordinates must be finite, got {','.join(row[1:])}")
+            raise ValueError(f"row {line}: coordinates must be finite, got {','.join(row[1:])}")
+        _check_range(np.array(values), f"row {line}")
         touches.setdefault(row[0].strip(), []).append(values[:3])
         approaches.setdefault(row[0].strip(), []).append(values[3:] or [np.nan] * 3)
         lines.setdefault(row[0].strip(), []).append(line)
@@ -84,8 +90,16 @@ def touch_csv(entries, plan_name):
     return "\n".join(lines) + "\n"
 
 
-def read_touch_json(text, feature_ids):
-    """Point touches by feature id, the other contacts, and the ball radius, from JSON text."""
+def read_touch_json(text, features):
+    """Point touches by feature id, the other contacts, the ball radius, approaches and the touch
+    labels (``touch K``, in the engine's touch order), from JSON text.
+
+    Entries have the keys of the touch plans (``fixturecad/schema/touches.schema.json``):
+    ``feature``, optional ``contact``, ``points`` (mm, measurement frame; one touch
+    each), optional ``approaches`` (one per point), and for a sensor other than a
+    point probe its ``sensor`` (one touch, ``points`` its contact point if known),
+    optional ``rho`` and ``fixture``.
+    """
     if not text.strip():
         raise ValueError("the touch file is empty")
     try:
@@ -94,39 +108,141 @@ def read_touch_json(text, feature_ids):
         raise ValueError(f"touch JSON is not valid JSON: {error.msg} at line {error.lineno}") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("touches"), list):
         raise ValueError('touch JSON must be an object with a "touches" list')
-    touches, contacts, approaches = {}, [], {}
-    for k, entry in enumerate(doc["touches"]):
+    radius = ball_radius(doc.get("ball_radius_mm", 0.0), "ball_radius_mm")
+    touches, contacts, approaches, labels = {}, [], {}, {}
+    contact_labels = []
+    for k, entry in enumerate(doc["touches"], start=1):
         where = f"touch {k}"
         if not isinstance(entry, dict):
-            raise ValueError(f"{where}: expected an object")
-        _check_id(entry.get("feature"), feature_ids, where)
-        if "contact" in entry:
-            sensor = entry.get("sensor")
-            if not isinstance(sensor, dict):
-                raise ValueError(f"{where}: a {entry['contact']} contact needs the sensor geometry")
-            for key, value in sensor.items():
-                if key != "kind":
-                    _check_finite(value, f"{where}: sensor {key}")
-            contacts.append(entry)
+            raise ValueError(f"{where}: expected an object with feature and points")
+        unknown = set(entry) - ENTRY_KEYS
+        if unknown:
+            hint = ' (a list of points is "points": [[x, y, z], ...], as in the touch plans)' if "point" in unknown else ""
+            raise ValueError(f"{where}: unknown key {sorted(unknown)[0]!r}{hint}; keys are {', '.join(sorted(ENTRY_KEYS))}")
+        _check_id(entry.get("feature"), features, where)
+        _check_contact(entry, features[entry["feature"]], radius, where)
+        points = _points(entry, "points", where, required="sensor" not in entry)
+        if "sensor" in entry:
+            if "contact" not in entry:
+                raise ValueError(f"{where}: a sensor entry needs its contact, e.g. \"PL/F-PL/F\"")
+            if len(points) > 1:
+                raise ValueError(f"{where}: a sensor makes one touch: give at most one contact point")
+            contacts.append(_sensor_contact(entry, points, where))
+            contact_labels.append(where)
+            continue
+        if "approaches" in entry:
+            approach = _points(entry, "approaches", where)
+            if len(approach) != len(points):
+                raise ValueError(f"{where}: {len(points)} points but {len(approach)} approaches")
         else:
-            point = _check_finite(entry.get("point"), f"{where}: point")
-            if point.shape != (3,):
-                raise ValueError(f"{where}: point must be [x, y, z] in mm")
-            touches.setdefault(entry["feature"], []).append(point)
-            approach = entry.get("approach")
-            approach = [np.nan] * 3 if approach is None else _check_finite(approach, f"{where}: approach")
-            approaches.setdefault(entry["feature"], []).append(approach)
+            approach = np.full((len(points), 3), np.nan)
+        touches.setdefault(entry["feature"], []).extend(points)
+        approaches.setdefault(entry["feature"], []).extend(approach)
+        labels.setdefault(entry["feature"], []).extend([where] * len(points))
     if not touches and not contacts:
         raise ValueError("the touch file has no touches")
-    radius = float(doc.get("ball_radius_mm", 0.0))
     arrays = {key: np.array(value, dtype=float) for key, value in approaches.items()}
     if all(np.isnan(a).all() for a in arrays.values()):
         arrays = {}
-    return {key: np.array(value) for key, value in touches.items()}, contacts, radius, arrays
+    rows = [label for key in touches for label in labels[key]] + contact_labels
+    return {key: np.array(value) for key, value in touches.items()}, contacts, radius, arrays, rows
+
+
+ENTRY_KEYS = {"feature", "contact", "points", "approaches", "sensor", "rho", "fixture"}
+
+
+def _check_contact(entry, feature, radius, where):
+    """An entry's contact, when given, is a contact type on the feature's element and, without a
+    sensor, the probe's own: a point (P/F) or, with a ball radius, a ball (S/M)."""
+    if "contact" not in entry:
+        return
+    if not isinstance(entry["contact"], str):
+        raise ValueError(f"{where}: contact must be a string such as \"P/F-PL/M\", got {entry['contact']!r}")
+    try:
+        ctype = ContactType.parse(entry["contact"])
+    except ValueError as error:
+        raise ValueError(f"{where}: {error}") from None
+    if ctype.fixture != feature.element:
+        raise ValueError(f"{where}: contact {entry['contact']} touches a {element(ctype.fixture).kind} but "
+                         f"{feature.id} is a {feature.kind}")
+    sensor = entry.get("sensor")
+    if isinstance(sensor, dict) and sensor.get("kind") in KINDS and element(sensor["kind"]).letter != ctype.sensor:
+        raise ValueError(f"{where}: contact {entry['contact']} has a {element(ctype.sensor).kind} sensor, "
+                         f"not a {sensor['kind']}")
+    probe = ("S", False) if radius > 0 else ("P", True)
+    if sensor is None and (ctype.sensor, ctype.sensor_fixed) != probe:
+        raise ValueError(f"{where}: touches without a sensor are made by the probe's "
+                         f"{'ball (S/M)' if radius > 0 else 'point (P/F)'}, not {entry['contact']}")
+
+
+def _points(entry, key, where, required=True):
+    """An entry's list of [x, y, z] (n, 3), finite numbers."""
+    if key not in entry:
+        if required:
+            raise ValueError(f"{where}: needs \"{key}\": [[x, y, z], ...] in mm")
+        return np.zeros((0, 3))
+    value = entry.get(key)
+    array = _check_finite(value, f"{where}: {key}")
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{where}: {key} must be a list of [x, y, z], got {value!r}")
+    _check_range(array, f"{where}: {key}")
+    return array
+
+
+def _sensor_contact(entry, points, where):
+    """The engine's contact of a sensor entry."""
+    sensor = entry["sensor"]
+    if not isinstance(sensor, dict) or sensor.get("kind") not in KINDS:
+        raise ValueError(f"{where}: sensor must be an object with a kind ({', '.join(KINDS)}) and its geometry")
+    keys = element(sensor["kind"]).json_keys
+    if set(sensor) != {"kind", *keys}:
+        raise ValueError(f"{where}: a {sensor['kind']} sensor has the keys kind, {', '.join(keys)}")
+    for key, value in sensor.items():
+        if key != "kind":
+            _check_range(_check_finite(value, f"{where}: sensor {key}"), f"{where}: sensor {key}")
+    contact = {"feature": entry["feature"], "contact": entry["contact"], "sensor": sensor}
+    if len(points):
+        contact["point"] = points[0].tolist()
+    if "rho" in entry:
+        contact["rho"] = float(_check_finite(entry["rho"], f"{where}: rho").reshape(-1)[0])
+    if "fixture" in entry:
+        if not isinstance(entry["fixture"], dict):
+            raise ValueError(f"{where}: fixture must be an object such as {{\"o\": [x, y, z]}}")
+        contact["fixture"] = {key: _check_finite(value, f"{where}: fixture {key}").tolist()
+                              for key, value in entry["fixture"].items()}
+    return contact
+
+
+def touch_json(touches, contacts=(), ball_radius_mm=0.0):
+    """A JSON touch file's text from touches by feature id and the engine's contacts (the reader's inverse)."""
+    entries = [{"feature": key, "points": np.asarray(value, float).reshape(-1, 3).tolist()}
+               for key, value in touches.items()]
+    for contact in contacts:
+        entry = {"feature": contact["feature"], "contact": contact["contact"], "sensor": contact["sensor"]}
+        if "point" in contact:
+            entry["points"] = [list(contact["point"])]
+        entry.update({key: contact[key] for key in ("rho", "fixture") if key in contact})
+        entries.append(entry)
+    # One entry a line, numbers exact (read back bit for bit): a file a user reads and edits.
+    lines = [json.dumps(entry) for entry in entries]
+    return (f'{{"ball_radius_mm": {float(ball_radius_mm)!r},\n "touches": [\n  '
+            + ",\n  ".join(lines) + "\n ]\n}\n")
+
+
+def ball_radius(value, where):
+    """A ball tip radius (mm): a finite number >= 0."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value < np.inf:
+        raise ValueError(f"{where} must be a number of mm >= 0, got {value!r}")
+    return float(value)
+
+
+def _check_range(array, where):
+    if np.abs(array).max(initial=0.0) > MAX_COORDINATE_MM:
+        raise ValueError(f"{where}: coordinates beyond {MAX_COORDINATE_MM:g} mm, got {np.abs(array).max():g}")
 
 
 def _check_id(feature_id, feature_ids, where):
-    if feature_id not in feature_ids:
+    if not isinstance(feature_id, str) or feature_id not in feature_ids:
         raise ValueError(f"{where}: unknown feature {feature_id!r}; features are {', '.join(feature_ids)}")
 
 
@@ -140,17 +256,26 @@ def _check_finite(value, where):
     return array
 
 
-def read_touch_file(path, feature_ids):
-    """(touches, contacts, ball radius, approaches) from a .csv or .json touch file."""
+def read_touch_file(path, features):
+    """(touches, contacts, ball radius, approaches, rows) from a .csv or .json touch file, for
+    ``features`` (dict id -> feature).
+
+    ``rows`` names every touch in the engine's order (point touches by feature,
+    then the contacts) by where it is in the file: ``row 8 of touches.csv``.
+    """
     try:
         with open(path, encoding="utf-8") as handle:
             text = handle.read()
     except OSError as error:
         raise ValueError(f"cannot read touch file {path}: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"touch file {path} is not UTF-8 text") from None
+    name = os.path.basename(path)
     if str(path).lower().endswith(".json"):
-        return read_touch_json(text, feature_ids)
-    touches, approaches, _ = read_touch_csv(text, feature_ids)
-    return touches, [], 0.0, approaches
+        touches, contacts, radius, approaches, labels = read_touch_json(text, features)
+        return touches, contacts, radius, approaches, [f"{label} of {name}" for label in labels]
+    touches, approaches, lines = read_touch_csv(text, features)
+    return touches, [], 0.0, approaches, [f"row {line} of {name}" for key in touches for line in lines[key]]
 
 
 def check_enough(features, touches, contacts, ball_radius_mm):
@@ -164,15 +289,42 @@ def check_enough(features, touches, contacts, ball_radius_mm):
         raise ValueError(f"too few touches: {count} touches give {rows} constraints, a pose needs at least {MIN_ROWS}")
 
 
-def format_result(result):
-    """A short human-readable report of a registration result."""
+def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM,
+                  ball_radius_mm=None, fixture_tolerance_mm=None):
+    """Check the options, read a touch file and register it; the result names every touch's row
+    (``rows``, in the engine's touch order) and each flagged touch's.
+
+    ``ball_radius_mm`` None: as the file says (a CSV: 0). Errors are one-line ``ValueError``.
+    """
+    if not 0 < sigma_mm < np.inf:
+        raise ValueError(f"--sigma must be a positive number of mm, got {sigma_mm}")
+    if not 0 < lever_mm < np.inf:
+        raise ValueError(f"--lever must be a positive number of mm, got {lever_mm}")
+    if fixture_tolerance_mm is not None and not 0 <= fixture_tolerance_mm < np.inf:
+        raise ValueError(f"--fixture-tolerance must be a non-negative number of mm, got {fixture_tolerance_mm}")
+    if ball_radius_mm is not None:
+        ball_radius(ball_radius_mm, "--ball-radius")
+    touches, contacts, radius, approaches, rows = read_touch_file(path, features)
+    radius = radius if ball_radius_mm is None else ball_radius_mm
+    check_enough(features, touches, contacts, radius)
+    result = register(touches, sigma_mm=sigma_mm, ball_radius_mm=radius, contacts=contacts,
+                      approaches=approaches, lever_mm=lever_mm, fixture_tolerance_mm=fixture_tolerance_mm)
+    result["touch_rows"] = rows
+    for flag in result["flagged"]:
+        flag["row"] = rows[flag["touch"]]
+    return result
+
+
+def format_result(result, pose_format="matrix"):
+    """A short human-readable report of a registration result, the pose in a controller's convention."""
+    from .controllers import format_pose
+
     lines = [f"status: {result['status']}", f"rms residual: {result['rms_residual_mm']:.6f} mm"]
     if result["sigma_translation_mm"] is not None:
         lines.append(
             f"sigma: {result['sigma_translation_mm']:.6f} mm, {result['sigma_rotation_deg']:.6f} deg"
         )
-    lines.append("fixture2meas:")
-    lines.extend("  " + " ".join(f"{x:12.6f}" for x in row) for row in result["pose"])
+    lines.append(format_pose(pose_format, result["pose"], result["covariance"]))
     if len(result["solutions"]) > 1:
         lines.append(f"{len(result['solutions'])} solutions pass the residual test")
     for motion in result["free_motions"]:
@@ -180,8 +332,13 @@ def format_result(result):
     for flag in result.get("fixture_flagged", []):
         lines.append(f"fixture: {flag['feature']} departs {flag['departure_mm']:.3f} mm from the drawing "
                      f"({flag['mode']} {flag['deviation']:.4g}), beyond its tolerance")
+    rows = result.get("touch_rows")
     for flag in result["flagged"]:
-        lines.append(f"flagged: touch {flag['touch']} on {flag['feature']} ({flag['residual_mm']:.4f} mm off)")
+        where = flag.get("row", f"touch {flag['touch']}")
+        lines.append(f"flagged: {where} on {flag['feature']} ({flag['residual_mm']:.4f} mm off)")
+    if result["inadmissible"]:
+        named = [rows[i] if rows else f"touch {i}" for i in result["inadmissible"]]
+        lines.append("off its patch or touched from inside at this pose: " + ", ".join(named))
     if result["separating_touch"]:
         s = result["separating_touch"]
         lines.append(f"separating touch: {s['feature']} at {s['point_meas_mm']} (separates by {s['separation_mm']:.3f} mm)")
@@ -190,14 +347,18 @@ def format_result(result):
 
 def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEFAULT_SIGMA_MM,
          default_lever_mm=SENSOR_LEVER_MM):
-    """Command line: ``register.py touches.csv [--json]``; bad input is one line, exit 2.
+    """Command line: ``register.py touches.csv [--json] [--format NAME]``; bad input is one line, exit 2.
 
     The exit code tells the status: 0 unique, 3 ambiguous, 4 underdetermined,
     5 inconsistent (:data:`EXIT_CODES`).
     """
+    from .controllers import FORMATS
+
     parser = argparse.ArgumentParser(prog=prog, description="Pose of the fixture from touches.")
     parser.add_argument("touches", help="touch file: CSV feature,x,y,z (mm) or JSON")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument("--format", choices=FORMATS, default="matrix",
+                        help="the pose in a robot controller's convention and units (see docs/robot-frames.md)")
     parser.add_argument("--sigma", type=float, default=default_sigma_mm,
                         help="sensor placement noise, mm (each axis)")
     parser.add_argument("--lever", type=float, default=default_lever_mm,
@@ -207,24 +368,36 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
                         help="profile tolerance zone width of the printed features, mm (default: as recorded; 0: exact)")
     args = parser.parse_args(argv)
     try:
-        if not np.isfinite(args.sigma) or args.sigma <= 0:
-            raise ValueError(f"--sigma must be a positive number of mm, got {args.sigma}")
-        if not np.isfinite(args.lever) or args.lever <= 0:
-            raise ValueError(f"--lever must be a positive number of mm, got {args.lever}")
-        if args.fixture_tolerance is not None and not (0 <= args.fixture_tolerance < np.inf):
-            raise ValueError(f"--fixture-tolerance must be a non-negative number of mm, got {args.fixture_tolerance}")
-        touches, contacts, radius, approaches = read_touch_file(args.touches, list(features))
-        if args.ball_radius is not None:
-            radius = args.ball_radius
-        check_enough(features, touches, contacts, radius)
-        result = register(touches, sigma_mm=args.sigma, ball_radius_mm=radius, contacts=contacts,
-                          approaches=approaches, lever_mm=args.lever, fixture_tolerance_mm=args.fixture_tolerance)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a user sees the result and one-line errors, never Python warnings
+            result = register_file(features, register, args.touches, args.sigma, args.lever, args.ball_radius,
+                                   args.fixture_tolerance)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2
     try:
-        print(json.dumps(result, indent=2) if args.json else format_result(result), flush=True)
+        print(report(result, args.format, args.json), flush=True)
     except BrokenPipeError:
         # The reader stopped (``| head``): say nothing more, and let Python's exit not complain either.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return EXIT_CODES[result["status"]]
+
+
+def report(result, pose_format="matrix", as_json=False):
+    """What the command line prints: the JSON result (with the pose in ``pose_format`` under
+    ``controller``: its numbers, their sigmas and the text) or the human-readable report."""
+    if not as_json:
+        return format_result(result, pose_format)
+    from .controllers import format_pose, sigmas_from_covariance, values_from_pose
+
+    covariance = result["covariance"]
+    # A gimbal lock leaves an Euler angle without a first-order sigma: null in JSON.
+    sigmas = None if covariance is None else [
+        float(x) if np.isfinite(x) else None for x in sigmas_from_covariance(pose_format, result["pose"], covariance)]
+    result = dict(result, controller={
+        "format": pose_format,
+        "values": values_from_pose(pose_format, result["pose"]).tolist(),
+        "sigmas": sigmas,
+        "text": format_pose(pose_format, result["pose"], covariance),
+    })
+    return json.dumps(result, indent=2)

@@ -16,21 +16,6 @@ templates = pytest.importorskip("fixturecad.templates")
 NAMES = sorted(templates.TEMPLATES)
 
 
-@pytest.fixture(scope="session")
-def built(tmp_path_factory):
-    """Build each template once per session (fixture.stl, features.json, register.py)."""
-    build = pytest.importorskip("fixturecad.build")
-    root = tmp_path_factory.mktemp("fixtures")
-    cache = {}
-
-    def get(name):
-        if name not in cache:
-            cache[name] = build.build(templates.make(name), root / name)
-        return cache[name]
-
-    return get
-
-
 def _sampler(folder, random_positions=False):
     from fixturecad.registration.sampling import TouchSampler, load_mesh
 
@@ -112,8 +97,20 @@ def test_simulate_reports_errors_against_the_bound_and_writes_a_plot(built):
     summary = json.loads((folder / "simulation.json").read_text())
     assert summary["trials"] == 40 and summary["success_rate"] == 1.0
     assert 0.7 < summary["ratio_translation_to_crb"] < 1.5
-    random_plan = run("simulate", folder, "--trials", 10, "--plan", "random", "--nominal")
+    before = (folder / "simulation.json").read_bytes()
+    assert_bad_input(run("simulate", folder, "--trials", 10), "pass --force")
+    assert (folder / "simulation.json").read_bytes() == before
+    random_plan = run("simulate", folder, "--trials", 10, "--plan", "random", "--nominal", "--force")
     assert random_plan.returncode == 0, random_plan.stderr
+    assert json.loads((folder / "simulation.json").read_text())["plan"] == "random"
+
+
+def test_simulate_writes_where_out_says(built, tmp_path):
+    folder = built("cube")
+    out = run("simulate", folder, "--trials", 3, "--out", tmp_path / "sim")
+    assert out.returncode == 0, out.stderr
+    assert sorted(p.name for p in (tmp_path / "sim").iterdir()) == ["simulation.json", "simulation.png"]
+    assert f"plot: {tmp_path / 'sim' / 'simulation.png'}" in out.stdout
 
 
 def test_simulate_refuses_bad_options(built):

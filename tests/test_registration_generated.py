@@ -12,6 +12,7 @@ import pytest
 
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
+from fixturecad.registration.touchfile import touch_json
 from fixturecad.registration.generate import register_source, write_register_script
 from fixturecad.registration.pose import fixture2meas_from_rt, pose_errors, random_rotation
 
@@ -126,8 +127,7 @@ def test_generated_api_and_nominal_pose(bare_site, tmp_path):
 
 def test_generated_routine_reads_plane_and_line_sensors_from_json(bare_site, tmp_path):
     _, truth, touches, contacts = generated_case(tmp_path, "quarter-sphere", 5)
-    entries = [{"feature": k, "point": p.tolist()} for k, v in touches.items() for p in v] + contacts
-    (tmp_path / "touches.json").write_text(json.dumps({"touches": entries}))
+    (tmp_path / "touches.json").write_text(touch_json(touches, contacts))
     out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json")
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout)
@@ -139,8 +139,7 @@ def test_generated_routine_takes_the_sensor_noise_model(bare_site, tmp_path):
     """--sigma and --lever of register.py give the library's pose and covariance."""
     document, truth, touches, contacts = generated_case(tmp_path, "quarter-sphere", 6)
     touches, contacts = perturb_touches(touches, contacts, np.random.default_rng(6), 0.002, 10.0)
-    entries = [{"feature": k, "point": p.tolist()} for k, v in touches.items() for p in v] + contacts
-    (tmp_path / "touches.json").write_text(json.dumps({"touches": entries}))
+    (tmp_path / "touches.json").write_text(touch_json(touches, contacts))
     out = run_bare(bare_site, tmp_path, "register.py", "touches.json", "--json", "--sigma", 0.002, "--lever", 10,
                    "--fixture-tolerance", 0)
     assert out.returncode == 0, out.stderr
@@ -226,7 +225,8 @@ def test_ambiguous_exits_3(tmp_path):
 
     (tmp_path / "t.csv").write_text("feature,x,y,z\n" + "top,1,2,3\n" * 6)
     result = {"status": "ambiguous", "rms_residual_mm": 0.0, "sigma_translation_mm": None, "pose": np.eye(4).tolist(),
-              "solutions": [], "free_motions": [], "flagged": [], "separating_touch": None}
+              "solutions": [], "free_motions": [], "flagged": [], "separating_touch": None,
+              "covariance": None, "inadmissible": []}
     from fixturecad.registration.features import features_from_json
 
     features = features_from_json(features_document("cube"))
@@ -246,4 +246,4 @@ def test_register_py_embeds_every_module_its_modules_import():
             if isinstance(node, ast.Import) or (isinstance(node, ast.ImportFrom) and node.level == 0):
                 top = (node.module if isinstance(node, ast.ImportFrom) else node.names[0].name).split(".")[0]
                 assert top in ("numpy", "scipy", "math", "dataclasses", "functools", "argparse", "csv", "io",
-                               "json", "os", "sys"), (name, top)
+                               "json", "os", "sys", "warnings"), (name, top)

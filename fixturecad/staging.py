@@ -1,0 +1,172 @@
+"""Output folders written whole or not at all, replacing only what fixturecad wrote.
+
+Every command that writes a folder (``build``, ``calibrate``, ``plan``,
+``design``) fills a temporary folder ``.<name>.<pid>.tmp`` beside the target
+and moves it into place when complete. An interrupted command (Ctrl-C,
+SIGTERM) removes its temporary folder and exits with 130 or 143; one left by
+a killed process (its pid no longer running) is removed by the next command
+writing beside it. An
+existing target is replaced only with ``force``, and only if it is a folder
+fixturecad wrote (it holds a fixturecad features.json) or an empty folder.
+"""
+
+import json
+import os
+import shutil
+import signal
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+from fixturecad.errors import InputError
+
+FEATURES_SCHEMA_PREFIX = "fixturecad.features/"  # any version: a folder from an older fixturecad is still ours
+
+
+def written_by_fixturecad(folder: Path) -> bool:
+    """Whether ``folder`` holds a features.json that fixturecad wrote."""
+    try:
+        document = json.loads((Path(folder) / "features.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and str(document.get("schema", "")).startswith(FEATURES_SCHEMA_PREFIX)
+
+
+def check_target(target: Path, force: bool) -> Path:
+    """The target folder if it may be written; InputError (one line) naming the reason if not."""
+    if str(target) in ("", "."):
+        raise InputError("the output folder must be a new folder, not the current one")
+    target = Path(target)
+    resolved = target.resolve()
+    if resolved == Path.cwd() or resolved in Path.cwd().parents or resolved == resolved.parent:
+        raise InputError(f"{target} holds the current folder: choose a new output folder")
+    existing = next(folder for folder in resolved.parents if folder.exists())
+    if not existing.is_dir():
+        raise InputError(f"{existing} is a file, not a folder: cannot write {target}")
+    if target.is_symlink() or (target.exists() and not target.is_dir()):
+        raise InputError(f"{target} exists and is not a folder; fixturecad replaces only folders it wrote")
+    if target.is_dir() and any(target.iterdir()):
+        if not force:
+            raise InputError(f"{target} already exists; pass --force to replace it")
+        if not written_by_fixturecad(target):
+            raise InputError(f"{target} was not written by fixturecad (no fixturecad features.json): not replaced")
+    return target
+
+
+@contextmanager
+def staged_folder(target: Path, force: bool = False):
+    """Yield an empty temporary folder beside ``target``; move it into place when the block completes.
+
+    On any error or interruption the temporary folder is removed and the
+    target is left as it was. OSErrors (a read-only or missing parent) become
+    one-line InputErrors.
+    """
+    target = check_target(target, force)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        _remove_stale(target)
+        staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent))
+    except OSError as error:
+        raise InputError(f"cannot write in {target.parent}: {error.strerror or error}") from None
+    staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
+    try:
+        with _clean_exit_on_signals(staging):
+            yield staging
+            _move_into_place(staging, target)
+    except OSError as error:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise InputError(f"cannot write {target}: {error.strerror or error}") from None
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
+def check_files(folder: Path, names, force: bool) -> Path:
+    """A folder to write the named files into (made if missing); InputError if one exists and not ``force``."""
+    folder = Path(folder)
+    existing = [name for name in names if (folder / name).exists()]
+    if existing and not force:
+        raise InputError(f"{folder / existing[0]} already exists; pass --force to replace it")
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{folder} is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"cannot write in {folder}: {error.strerror or error}") from None
+    return folder
+
+
+@contextmanager
+def staged_file(path: Path):
+    """Yield a temporary path beside ``path`` (same suffix); moved onto ``path`` when the block completes."""
+    path = Path(path)
+    handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
+    os.close(handle)
+    try:
+        yield Path(name)
+        os.replace(name, path)
+    except OSError as error:
+        Path(name).unlink(missing_ok=True)
+        raise InputError(f"cannot write {path}: {error.strerror or error}") from None
+    except BaseException:
+        Path(name).unlink(missing_ok=True)
+        raise
+
+
+def _remove_stale(target: Path) -> None:
+    """Remove the temporary folders of ``target`` left by processes that no longer run."""
+    for path in [*target.parent.glob(f".{target.name}.*.tmp"), *target.parent.glob(f".{target.name}.*.old")]:
+        parts = path.name[len(target.name) + 2:].split(".")
+        if parts[0].isdigit() and not _running(int(parts[0])):
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextmanager
+def _clean_exit_on_signals(staging: Path):
+    """Ctrl-C or SIGTERM in the block: remove the temporary folder, say so in one line, exit 128 + signal.
+
+    Exiting from the handler, not raising, because an exception raised while
+    a C extension initialises (cadquery's import) comes out as an ImportError
+    with a traceback.
+    """
+    def stop(signum, frame):
+        shutil.rmtree(staging, ignore_errors=True)
+        os.write(2, b"fixturecad: interrupted; nothing was written\n")
+        os._exit(128 + signum)
+
+    try:
+        previous = {signum: signal.signal(signum, stop) for signum in (signal.SIGINT, signal.SIGTERM)}
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _move_into_place(staging: Path, target: Path) -> None:
+    if target.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".old", dir=target.parent))
+        os.replace(target, old / target.name)
+        os.replace(staging, target)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.replace(staging, target)

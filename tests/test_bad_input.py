@@ -1,0 +1,180 @@
+"""The field edges: every input of issue 10's audit ends in one line on stderr and exit 2 (or the
+documented code), nothing written or lost, no Python warning."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+
+import pytest
+
+from cli import assert_bad_input, run
+
+
+@pytest.fixture
+def cube(built, tmp_path):
+    """A copy of a built cube folder, free to damage."""
+    folder = tmp_path / "cube"
+    shutil.copytree(built("cube"), folder)
+    return folder
+
+
+def touches_csv(folder, path, rows):
+    path.write_text("feature,x,y,z\n" + "".join(f"{row}\n" for row in rows))
+    return path
+
+
+def test_out_must_be_a_new_folder(cube, tmp_path):
+    for out in (".", "..", ""):
+        assert_bad_input(run("build", "cube", "--out", out, "--force", cwd=cube), "folder")
+    assert sorted(p.name for p in cube.parent.iterdir()) == ["cube"]
+
+
+def test_out_below_a_file_or_in_a_read_only_folder(cube, tmp_path):
+    (tmp_path / "file").write_text("mine")
+    assert_bad_input(run("build", "cube", "--out", tmp_path / "file" / "x"), "is a file")
+    assert_bad_input(run("build", "cube", "--out", tmp_path / "file", "--force"), "not a folder")
+    assert (tmp_path / "file").read_text() == "mine"
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    with _read_only(locked):
+        assert_bad_input(run("build", "cube", "--out", locked / "x"), "cannot write")
+        assert list(locked.iterdir()) == []
+
+
+@contextmanager
+def _read_only(folder):
+    """A folder this user cannot write in: mode 555, or immutable (chattr +i) for root."""
+    folder.chmod(0o555)
+    immutable = os.access(folder, os.W_OK) and shutil.which("chattr") is not None and subprocess.run(
+        ["chattr", "+i", str(folder)], capture_output=True).returncode == 0
+    try:
+        if os.access(folder, os.W_OK) and not immutable:
+            pytest.skip("this user writes in read-only folders and cannot make one immutable")
+        yield
+    finally:
+        if immutable:
+            subprocess.run(["chattr", "-i", str(folder)], check=True)
+        folder.chmod(0o755)
+
+
+def test_force_replaces_only_what_fixturecad_wrote(cube, tmp_path):
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("keep me")
+    assert_bad_input(run("build", "cube", "--out", theirs, "--force"), "not written by fixturecad")
+    assert (theirs / "notes.txt").read_text() == "keep me"
+    assert_bad_input(run("build", "cube", "--out", cube), "--force")
+    (cube / "mine.txt").write_text("x")
+    assert run("build", "cube", "--out", cube, "--force").returncode == 0
+    assert not (cube / "mine.txt").exists() and (cube / "features.json").exists()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert run("build", "cube", "--out", empty).returncode == 0
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_an_interrupted_build_leaves_nothing_and_says_so(tmp_path, signum):
+    (tmp_path / ".cube.999999999.tmp").mkdir()  # left by a killed build: its pid does not run
+    process = subprocess.Popen([sys.executable, "-c", "from fixturecad.cli import main; main()", "build", "cube",
+                                "--out", "cube"], cwd=tmp_path, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not any(p.name.startswith(f".cube.{process.pid}.") for p in tmp_path.iterdir()):
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.01)
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signum
+    assert stderr == "fixturecad: interrupted; nothing was written\n"
+    assert list(tmp_path.iterdir()) == []  # its own temporary folder and the stale one are gone
+
+
+@pytest.mark.parametrize("content", ["", "garbage(\n", "x = 1\n"])
+def test_a_damaged_register_py(cube, content):
+    (cube / "register.py").write_text(content)
+    assert_bad_input(run("register", cube, cube / "touches.template.csv"), "register.py", "rebuild")
+
+
+def test_a_truncated_stl(cube):
+    data = (cube / "fixture.stl").read_bytes()
+    (cube / "fixture.stl").write_bytes(data[: len(data) // 2])
+    assert_bad_input(run("simulate", cube, "--trials", 2), "fixture.stl", "rebuild")
+    assert not (cube / "simulation.json").exists()
+
+
+def test_simulate_seed_must_not_be_negative(cube):
+    assert_bad_input(run("simulate", cube, "--seed", -1), "--seed")
+
+
+JSON_CASES = {
+    "radius null": ({"ball_radius_mm": None, "touches": [{"feature": "top", "points": [[1, 2, 50]]}]}, "ball_radius_mm"),
+    "radius list": ({"ball_radius_mm": [1], "touches": [{"feature": "top", "points": [[1, 2, 50]]}]}, "ball_radius_mm"),
+    "radius negative": ({"ball_radius_mm": -1, "touches": [{"feature": "top", "points": [[1, 2, 50]]}]}, "ball_radius_mm"),
+    "contact a number": ({"touches": [{"feature": "top", "contact": 5, "points": [[1, 2, 50]]}]}, "contact"),
+    "sensor without point": ({"touches": [{"feature": "top", "contact": "PL/F-PL/F",
+                                           "sensor": {"kind": "plane", "normal": [0, 0, 1]}}]}, "point, normal"),
+    "sensor without normal": ({"touches": [{"feature": "top", "contact": "PL/F-PL/F", "points": [[1, 2, 50]],
+                                            "sensor": {"kind": "plane", "point": [1, 2, 50]}}]}, "point, normal"),
+    "sensor of zero normal": ({"touches": [{"feature": "top", "contact": "PL/F-PL/F", "points": [[1, 2, 50]],
+                                            "sensor": {"kind": "plane", "point": [1, 2, 50], "normal": [0, 0, 0]}}] * 6},
+                              "non-zero"),
+    "feature a list": ({"touches": [{"feature": ["top"], "points": [[1, 2, 50]]}]}, "unknown feature"),
+    "not an object": ([1, 2], "object"),
+    "huge": ({"touches": [{"feature": "top", "points": [[1e302, 2, 50]] * 6}]}, "beyond"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(JSON_CASES))
+def test_bad_json_touch_files(cube, tmp_path, case):
+    document, words = JSON_CASES[case]
+    path = tmp_path / "touches.json"
+    path.write_text(json.dumps(document))
+    assert_bad_input(run("register", cube, path), words)
+    out = subprocess.run([sys.executable, str(cube / "register.py"), str(path)], capture_output=True, text=True)
+    assert out.returncode == 2 and len(out.stderr.splitlines()) == 1 and words in out.stderr, out.stderr
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+def test_ball_radius_must_be_a_length(cube, value):
+    assert_bad_input(run("register", cube, cube / "touches.template.csv", "--ball-radius", value), "--ball-radius")
+
+
+def test_huge_coordinates_in_a_csv(cube, tmp_path):
+    path = touches_csv(cube, tmp_path / "t.csv", ["top,1e302,0,50"] * 6)
+    assert_bad_input(run("register", cube, path), "row 2", "beyond")
+
+
+def test_six_identical_touches_warn_nothing(cube, tmp_path):
+    """Underdetermined (exit 4) with the free motions named, and not a Python warning."""
+    path = touches_csv(cube, tmp_path / "t.csv", ["top,10,10,50"] * 6)
+    for command in ([sys.executable, "-W", "error", str(cube / "register.py"), str(path)],
+                    [sys.executable, "-W", "error", "-c", "from fixturecad.cli import main; main()", "register",
+                     str(cube), str(path)]):
+        out = subprocess.run(command, capture_output=True, text=True)
+        assert out.returncode == 4, out.stderr
+        assert out.stderr == "" and "free: planar motion {G_P} in the plane of top" in out.stdout
+
+
+def test_suggest_bounds_the_counts():
+    assert_bad_input(run("suggest", "{S-T2}x1000000000{R}x1000000000"), "more than 64 contacts")
+
+
+def test_version_and_bare_help():
+    from fixturecad import __version__
+
+    out = run("--version")
+    assert out.returncode == 0 and out.stdout == f"fixturecad {__version__}\n"
+    bare = run()
+    assert bare.returncode == 0 and "Usage: fixturecad" in bare.stdout and bare.stderr == ""
+
+
+def test_build_help_shows_the_default_folder_and_the_parameters():
+    out = run("build", "--help")
+    text = " ".join(out.stdout.split())
+    assert "out/<template>-<parameters>" in text
+    assert "quarter-sphere: --radius 40 mm (5..500)" in text
+    assert "--lever" in run("register", "--help").stdout and "20.0" in run("register", "--help").stdout
