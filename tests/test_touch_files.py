@@ -153,3 +153,20 @@ def test_a_bad_json_touch_is_named_by_its_entry(built, tmp_path):
     path.write_text(json.dumps({"touches": [{"feature": "flat_a", "points": [[0, 1, 0]]},
                                             {"feature": "sphere", "point": [0, 1, 0]}]}))
     assert_bad_input(run("register", folder, path), "touch 2", '"points"')
+
+
+def test_a_gross_outlier_is_reported_with_its_real_distance(built, tmp_path):
+    """A touch 1 m off: named with its distance, and the good touches are not called inadmissible."""
+    folder = built("cube")
+    lines = (folder / "touches.template.csv").read_text().splitlines()
+    lines += ["top,30.0,30.0,50.0", "front,30.0,0.0,30.0", "left,0.0,40.0,10.0"]
+    off = lines.index("front,10.0000,0.0000,25.0000")
+    lines[off] = "front,10.0000,1000.0000,25.0000"
+    path = tmp_path / "touches.csv"
+    path.write_text("\n".join(lines) + "\n")
+    result = json.loads(run("register", folder, path, "--json").stdout)
+    assert result["status"] == "inconsistent"
+    assert [flag["row"] for flag in result["flagged"]] == [f"row {off + 1} of touches.csv"]
+    assert abs(result["flagged"][0]["residual_mm"] - 1000.0) < 0.01
+    assert result["inadmissible"] == []
+    assert np.abs(np.array(result["pose"]) - np.eye(4)).max() < 1e-6
