@@ -51,6 +51,19 @@ def _candidates(points, lines, planes):
     return [(words, np.array(algebra)) for _, words, algebra in out]
 
 
+def core_symmetry(feature, name) -> tuple:
+    """(words, algebra (k, 6)) of the motions that carry a feature onto itself: {S_o} about a point
+    core (a point, a sphere's centre), {C_u} along a line core (a line, a cylinder's axis), {G_P} in a plane."""
+    core, anchor, direction, _ = feature.core()
+    if core == "point":
+        return f"spherical motion {{S_o}} about {name}", np.array([_rotation(anchor, e) for e in np.eye(3)])
+    if core == "line":
+        return f"cylindrical motion {{C_u}} along {name}", np.array([_rotation(anchor, direction), _translation(direction)])
+    e1, e2 = perpendicular_basis(direction)
+    return f"planar motion {{G_P}} in the plane of {name}", np.array(
+        [_rotation(anchor, direction), _translation(e1), _translation(e2)])
+
+
 def _vec(v, digits=3):
     """Coordinates in words, rounding off what is zero but for rounding (no -0)."""
     v = np.where(np.abs(v) < 1e-9 * max(np.abs(v).max(), 1.0), 0.0, v) + 0.0
