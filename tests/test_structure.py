@@ -24,6 +24,9 @@ def test_the_labels_decide_the_mobility_of_six_point_plane_contacts():
     assert analyze(CUBE_321).mobility == 0 and analyze(CUBE_321).minimal
     four = analyze(CUBE_411)
     assert four.mobility == 1 and not four.minimal
+    # Named by the features, not by the coordinates of the random placement.
+    assert four.freedom == ["rotation {R_u} about an axis parallel to the normal of a"]
+    assert analyze(CUBE_321[:5]).freedom == ["translation {T_u} parallel to the line where a and b meet"]
     assert sorted(set(four.redundant)) == ["P/F-PL/M@a"] and len(four.redundant) == 4
     face = analyze(ONE_FACE)
     assert face.mobility == 3

@@ -107,13 +107,22 @@ class Structure:
         return null_space(np.vstack(self.rows()), LENGTH_MM)
 
     def freedom(self) -> list:
-        """The free motions in standard form, named after the features (their labels)."""
+        """The free motions in standard form, named after the features (their labels); an axis no
+        feature carries is named by the feature direction it is parallel to, never by coordinates of
+        the random placement unless none is."""
         points, lines, planes = {}, {}, {}
         for label, feature in self.features.items():
             core, anchor, direction, _ = feature.core()
             {"point": points, "line": lines, "plane": planes}[core][_core_name(feature, label)] = (
                 anchor if core == "point" else (anchor, direction))
-        return free_motion_names(self.free_twists(), points, lines, planes, LENGTH_MM)
+        directions = {_direction_word(f, label): f.core()[2] for label, f in self.features.items()
+                      if f.core()[2] is not None}
+        planes_only = [(label, f.normal) for label, f in self.features.items() if f.kind == "plane"]
+        for (a, na), (b, nb) in combinations(planes_only, 2):
+            meet = np.cross(na, nb)
+            if np.linalg.norm(meet) > 1e-9:
+                directions[f"the line where {a} and {b} meet"] = meet / np.linalg.norm(meet)
+        return free_motion_names(self.free_twists(), points, lines, planes, LENGTH_MM, directions)
 
     def is_symmetry_of(self, label) -> tuple:
         """(whether the free motions are exactly the symmetry of feature ``label``, its words)."""
