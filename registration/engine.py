@@ -70,7 +70,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
     problem = Problem(groups, sigma_mm, lever_mm, tolerance)
     if not problem.groups:
-        raise ValueError("no touches given")
+        raise ValueError("no touches given: every feature's list of touches is empty")
     solutions = solve(problem, initial_pose)
     best = solutions[0]
     result = {"flagged": [], "fixture_flagged": [], "free_motions": [], "separating_touch": None}
