@@ -18,7 +18,7 @@ from fixturecad.staging import staged_folder
 if TYPE_CHECKING:
     from fixturecad.templates.base import Template
 
-FILES = {"step": "fixture.step", "stl": "fixture.stl", "features": "features.json",
+FILES = {"step": "fixture.step", "stl": "fixture.stl", "3mf": "fixture.3mf", "features": "features.json",
          "preview": "preview.png", "register": "register.py", "touches": "touches.template.csv",
          "touches_json": "touches.template.json"}
 # Relative agreement required between the BREP volume and the analytic one.
@@ -47,7 +47,8 @@ def check_fixture_tolerance(value: float) -> float:
 def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM,
                       fixture_tolerance: float = DEFAULT_ZONE_MM) -> dict:
     """The features.json of a build of ``template`` (no CAD needed)."""
-    files = {"step": FILES["step"], "stl": FILES["stl"], "stl_tolerance_mm": stl_tolerance, "preview": FILES["preview"]}
+    files = {"step": FILES["step"], "stl": FILES["stl"], "3mf": FILES["3mf"], "stl_tolerance_mm": stl_tolerance,
+             "preview": FILES["preview"]}
     return features_json.document(template, files, fixture_tolerance)
 
 
@@ -95,10 +96,10 @@ def build(template: "Template", target: Path, force: bool = False,
 
 def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture_tolerance: float, side) -> None:
     from fixturecad.cad.brep import match_features
-    from fixturecad.cad.export import export
+    from fixturecad.cad.export import Named, export
     from fixturecad.cad.mesh import triangulate
     from fixturecad.cad.solid import fixture_solid
-    from fixturecad.preview import fixture_scene
+    from fixturecad.preview import feature_colours, fixture_scene
 
     shape = fixture_solid(template)
     if not shape.isValid() or len(shape.Solids()) != 1:
@@ -116,8 +117,10 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
     # the side process draws preview.png and writes register.py while we write STEP and STL
     side.send(("preview", fixture_scene(template, features, matches, parts), folder / FILES["preview"]),
               ("register", document, folder / FILES["register"]))
-    export(shape, folder / FILES["step"])
-    export(shape, folder / FILES["stl"], stl_tolerance, template.slug())
+    colours = feature_colours([feature.id for feature in features])
+    named = [Named(f.id, **{("edges" if f.kind == "line" else "faces"): tuple(matches[f.id])}, colour=colours[f.id])
+             for f in features if f.kind != "point"]
+    export(shape, [folder / FILES[kind] for kind in ("step", "stl", "3mf")], stl_tolerance, template.slug(), named)
     (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")
     (folder / FILES["touches_json"]).write_text(touch_template_json(template), encoding="utf-8")
     side.wait()

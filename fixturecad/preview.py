@@ -16,6 +16,11 @@ FRAME_AXIS_FRACTION = 0.3  # length of the drawn frame axes, as a fraction of th
 VIEWS = ((28.0, -60.0), (-28.0, 120.0))  # (elevation, azimuth) deg: front-top and back-bottom
 
 
+def feature_colours(ids) -> dict:
+    """The colour (hex) of each feature id, in features.json order: the preview's, the STEP's and the 3MF's."""
+    return {fid: FEATURE_COLOURS[i % len(FEATURE_COLOURS)] for i, fid in enumerate(ids)}
+
+
 def view_from_direction(direction) -> tuple:
     """(elevation, azimuth) in degrees of a camera looking from ``direction`` towards the origin."""
     x, y, z = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
@@ -137,7 +142,7 @@ def render(data: dict, path) -> None:
     from matplotlib.patches import Patch
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    colours = {f["id"]: FEATURE_COLOURS[i % len(FEATURE_COLOURS)] for i, f in enumerate(data["features"])}
+    colours = feature_colours([f["id"] for f in data["features"]])
     all_points = np.vstack([v for v, _, _ in data["faces"]])
     low, high = all_points.min(axis=0), all_points.max(axis=0)
     centre, half = (low + high) / 2, (high - low).max() / 2 * 1.05
@@ -164,7 +169,7 @@ def render(data: dict, path) -> None:
             normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
             normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
             shade = 0.55 + 0.45 * np.abs(normals @ light)
-            base = np.array(_rgb(colours.get(feature_id, INERT_COLOUR)))
+            base = np.array(rgb(colours.get(feature_id, INERT_COLOUR)))
             all_tris.append(tris)
             all_colours.append(np.clip(base[None, :] * shade[:, None], 0, 1))
         face_colours = np.concatenate(all_colours)  # edges in the face colour close antialiasing seams
@@ -246,7 +251,8 @@ def _subdivide(tris, max_edge: float, levels: int = 5):
     return tris
 
 
-def _rgb(colour: str):
+def rgb(colour: str):
+    """(r, g, b) in [0, 1] of a hex colour."""
     colour = colour.lstrip("#")
     return [int(colour[i : i + 2], 16) / 255 for i in (0, 2, 4)]
 

@@ -278,6 +278,6 @@ def test_only_the_cad_room_and_template_bodies_import_the_kernel():
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
             if any(n.split(".")[0] in ("cadquery", "OCP") for n in names):
                 importers.add(f"{path.relative_to(root)}{':body' if id(node) in in_body else ''}")
-    room = {f"fixturecad/cad/{name}.py" for name in ("brep", "mesh", "solid")}
+    room = {f"fixturecad/cad/{name}.py" for name in ("brep", "export", "mesh", "solid")}
     bodies = {f"{Path(inspect.getsourcefile(cls)).relative_to(root)}:body" for cls in TEMPLATES.values()}
     assert importers == room | bodies

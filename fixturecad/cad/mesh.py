@@ -48,18 +48,18 @@ def triangulate(shape, tolerance: float, angular_tolerance: float = ANGULAR_TOLE
 def merged_mesh(parts):
     """One indexed mesh from per-face parts: shared boundary nodes merged, degenerate facets dropped.
 
-    Returns vertices (n, 3) and faces (m, 3).
+    Returns vertices (n, 3), faces (m, 3) and the index of the part (the BREP face) of every face (m,).
     """
     offsets = np.cumsum([0] + [len(nodes) for _, nodes, _ in parts])
     vertices = np.vstack([nodes for _, nodes, _ in parts])
     faces = np.vstack([tri + offset for (_, _, tri), offset in zip(parts, offsets)])
+    owner = np.concatenate([np.full(len(tri), k) for k, (_, _, tri) in enumerate(parts)])
     # faces share their boundary edges' nodes exactly; merge far below any chord tolerance
     _, first, inverse = np.unique(np.round(vertices, MERGE_DIGITS), axis=0, return_index=True, return_inverse=True)
     vertices, faces = vertices[first], inverse.reshape(-1)[faces]
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
-    faces = faces[keep]
-    keep = _areas(vertices, faces) > 0
-    return vertices, faces[keep]
+    keep[keep] = _areas(vertices, faces[keep]) > 0
+    return vertices, faces[keep], owner[keep]
 
 
 def _areas(vertices, faces):
@@ -69,9 +69,18 @@ def _areas(vertices, faces):
 
 def mesh_from_shape(shape, tolerance: float):
     """Vertices and faces of a watertight, consistently outward-wound mesh of ``shape``; MeshError if not."""
-    vertices, faces = merged_mesh(triangulate(shape, tolerance))
-    check_mesh(vertices, faces)
+    vertices, faces, _ = labelled_mesh(shape, tolerance)
     return vertices, faces
+
+
+def labelled_mesh(shape, tolerance: float):
+    """:func:`mesh_from_shape` with the index of the BREP face (in ``shape.Faces()``) of every triangle."""
+    parts = triangulate(shape, tolerance)
+    if len(parts) != len(shape.Faces()):
+        raise MeshError("a face of the solid has no triangulation")
+    vertices, faces, owner = merged_mesh(parts)
+    check_mesh(vertices, faces)
+    return vertices, faces, owner
 
 
 def check_mesh(vertices, faces) -> None:
