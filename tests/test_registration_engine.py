@@ -469,3 +469,19 @@ def test_the_chi_square_quantile_is_scipys():
     for probability in (0.5, 0.95, 0.999):
         for dof in list(range(1, 60)) + [99, 100, 257, 1000]:
             assert chi_square_quantile(probability, dof) == pytest.approx(chi2.ppf(probability, dof), rel=1e-10)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 12 (open): the start-based search misses Example One's second "
+                                       "solution, 47.81 mm along the edge, and says unique")
+def test_the_paper_example_one_has_two_solutions_along_the_edge():
+    """The paper's Example One: the sphere touch leaves two exact, admissible poses along the edge."""
+    from fixturecad.build import features_document
+    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.synthetic import plan_touches
+    from fixturecad.templates import make
+
+    document = features_document(make("quarter-sphere"))
+    touches, contacts = plan_touches(document["plans"]["paper"]["touch_plan"], np.eye(4))
+    result = register_touches(features_from_json(document), touches, contacts=contacts)
+    along = sorted(round(np.array(s["pose"])[0, 3], 2) for s in result["solutions"])
+    assert result["status"] == "ambiguous" and along == [0.0, 47.81]
