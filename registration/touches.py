@@ -10,7 +10,7 @@ import numpy as np
 
 from .contacts import ContactType, make_side
 from .defaults import MAX_COORDINATE_MM
-from .elements import element
+from .elements import element, outward
 from .noise import placement_centre
 
 @dataclass
@@ -48,7 +48,7 @@ def fixture_side(feature, fixed: bool, **extra):
     geometry = el.side_geometry(feature)
     if el.letter == "P":
         fixed, geometry["o"] = True, feature.point
-    return make_side(el.letter, fixed, **geometry, **extra)
+    return make_side(el.letter, fixed, **{**geometry, **extra})
 
 
 def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
@@ -85,8 +85,10 @@ def sensor_geometry(ctype, sensor, contact_point=None):
         geometry = {key: np.asarray(value, dtype=np.float64) for key, value in sensor.items()}
     else:
         names = dict(element(sensor["kind"]).keys)
+        if sensor["kind"] == "plane":
+            names["line"] = "e"  # a fixed plane's known contact line with a line, a cylinder or a plane
         geometry = {names[key]: np.asarray(value, dtype=np.float64) for key, value in sensor.items() if key in names}
-        for key in ("n", "d"):
+        for key in ("n", "d", "e"):
             if key in geometry:
                 length = np.linalg.norm(geometry[key])
                 if not length > 1e-9:
@@ -99,6 +101,13 @@ def sensor_geometry(ctype, sensor, contact_point=None):
                 raise ValueError(f"a fixed {ctype.sensor} sensor needs its contact point")
             contact_point = geometry["c"]
         geometry["o"] = np.asarray(contact_point, dtype=np.float64)
+        el = element(ctype.sensor)
+        if el.round:
+            # a fixed ball or cylinder knows its normal at the contact point, and so its contact line's side
+            core, anchor, direction, _ = el.core_of({json: geometry[side] for json, side in el.keys})
+            geometry["u"] = outward(core, anchor, direction, geometry["o"][None])[0]
+            if el.core == "line":
+                geometry["m"] = geometry["u"]
     return geometry
 
 
@@ -123,6 +132,8 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
     extra = {key: np.asarray(value, dtype=np.float64) for key, value in (fixture or {}).items()}
     if ctype.fixture_fixed and "o" in extra and "u" not in extra and element(feature.kind).surface:
         extra["u"] = feature.normal_at(extra["o"])[0]
+        if feature.kind == "cylinder":
+            extra["m"] = extra["u"]  # the known contact line's side of the axis
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
     if rho is None:
         rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(feature.core()[3])

@@ -1,0 +1,94 @@
+"""What a design realises: contacts written sensor first, each on a labelled fixture feature.
+
+``P/F-PL/M@a P/F-PL/M@a S/M-S/M@b``: contacts with one label touch one
+fixture element (the side written second). A class of Table V is realised by
+one contact of each of its members, in the orientation a touch plan can make
+with the sensors of a cell: a point probe first, then a ball tip, a plane, a
+line, a cylinder, on the fixture's faces, balls, bosses and edges.
+"""
+
+import re
+from dataclasses import dataclass
+
+from fixturecad.errors import InputError
+from fixturecad.registration.contacts import ContactType
+from fixturecad.design.layout import FEATURE_NAMES
+from fixturecad.theory.catalogue import CLASSES, classes, lookup
+
+SENSOR_PREFERENCE = ("P", "S", "PL", "L", "C")  # what a cell most likely holds first
+FIXTURE_PREFERENCE = ("PL", "S", "C", "L", "P")  # what prints best first
+LABEL = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
+
+
+@dataclass
+class Combination:
+    """Contacts (sensor first) with the feature id each touches, and the class they make."""
+
+    contacts: list
+    labels: list
+
+    @property
+    def members(self) -> list:
+        return sorted((lookup(c.name).contact_class for c in self.contacts), key=CLASSES.index)
+
+    @property
+    def contact_class(self) -> str:
+        return "".join("{" + m + "}" for m in self.members)
+
+    def tokens(self) -> list:
+        return [f"{c.name}@{label}" for c, label in zip(self.contacts, self.labels)]
+
+
+def plan_gap(ctype: ContactType) -> str:
+    """Why a touch plan cannot make this contact ('' when it can)."""
+    if ctype.is_locus and ctype.fixture == "PL" and ctype.fixture_fixed and ctype.sensor != "PL":
+        return (f"{ctype.name}: a touch plan cannot say where on the fixture's face the contact line lies; "
+                f"write it {ctype.swapped().name} (the plane as the sensor) or with the face mobile")
+    return ""
+
+
+def parse(tokens) -> Combination:
+    """``["P/F-PL/M@a", "S/M-S/M"]`` -> Combination; InputError (one line) for anything unreadable.
+
+    An unlabelled contact gets a feature of its own.
+    """
+    contacts, labels = [], []
+    for number, token in enumerate(tokens, start=1):
+        text, _, label = token.partition("@")
+        try:
+            ctype = ContactType.parse(text)
+            lookup(ctype.name)
+        except ValueError as error:
+            raise InputError(str(error).split("; valid")[0]) from None
+        if label and not LABEL.match(label):
+            raise InputError(f"cannot read label {label!r} of {token!r}: a letter, then letters, digits or _")
+        gap = plan_gap(ctype)
+        if gap:
+            raise InputError(gap)
+        contacts.append(ctype)
+        labels.append(label or f"{FEATURE_NAMES[ctype.fixture]}_{number}")
+    for label in set(labels):
+        kinds = {c.fixture for c, l in zip(contacts, labels) if l == label}
+        if len(kinds) > 1:
+            raise InputError(f"label {label} is on two element kinds ({' and '.join(sorted(kinds))}): "
+                             "one label is one fixture element")
+    if not contacts:
+        raise InputError("give contacts (e.g. P/F-PL/M@a) or --class")
+    return Combination(contacts, labels)
+
+
+def preferred_contact(member: str) -> ContactType:
+    """The contact of a Table IV class a design uses: the handiest sensor on the handiest feature."""
+    options = []
+    for entry in classes()[member]:
+        for ctype in (entry.ctype, entry.ctype.swapped()):
+            if not plan_gap(ctype):
+                options.append((SENSOR_PREFERENCE.index(ctype.sensor), FIXTURE_PREFERENCE.index(ctype.fixture),
+                                not ctype.sensor_fixed, ctype.fixture_fixed, ctype.name, ctype))
+    return min(options)[-1]
+
+
+def for_class(members) -> Combination:
+    """One combination of the class ``members`` (Table IV names), each contact on its own feature."""
+    contacts = [preferred_contact(member) for member in members]
+    return Combination(contacts, [f"{FEATURE_NAMES[c.fixture]}_{n}" for n, c in enumerate(contacts, start=1)])
