@@ -1,0 +1,1 @@
+"""``fixturecad design``: a fixture for any catalogue combination (combination, layout, fixture)."""

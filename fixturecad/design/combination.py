@@ -92,3 +92,10 @@ def for_class(members) -> Combination:
     """One combination of the class ``members`` (Table IV names), each contact on its own feature."""
     contacts = [preferred_contact(member) for member in members]
     return Combination(contacts, [f"{FEATURE_NAMES[c.fixture]}_{n}" for n, c in enumerate(contacts, start=1)])
+
+
+def in_table_five(members) -> bool:
+    """Whether the class locates the part minimally (Table V's own test)."""
+    from fixturecad.theory.enumeration import SEARCH_SEED, class_wrenches, locates_minimally
+
+    return len(members) <= 6 and locates_minimally(list(members), class_wrenches(SEARCH_SEED, 6))

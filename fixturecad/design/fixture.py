@@ -6,15 +6,17 @@ the part with its touch plan at the real geometry; ``fixturecad.build.build``
 then writes it like any template.
 """
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from fixturecad.errors import InputError
 from fixturecad.registration.datums import DatumScheme
 from fixturecad.registration.features import Extent, Plane
-from fixturecad.registration.motions import free_motion_names
-from fixturecad.registration.mobility import null_space
+from fixturecad.registration.motions import free_motions
 from fixturecad.design.combination import Combination
-from fixturecad.design.layout import (CLEARANCE_MM, MIN_SIZE_MM, Layout, best_layout, layout_plan, plan_jacobian)
+from fixturecad.design.layout import (CLEARANCE_MM, LAYOUT_TRIALS, MIN_SIZE_MM, Layout, best_layout, layout_plan,
+                                      plan_problem)
 from fixturecad.templates.base import Param, Plan, Template, box_halfspaces, touch
 
 DEFAULT_SIZE_MM = 100.0
@@ -96,14 +98,15 @@ class Design(Template):
 
 
 def remaining_freedom(combination: Combination, size: float, ball_mm: float, seed: int) -> str:
-    """The free motions of the combination's plan on a layout that fits, named in the fixture frame."""
+    """The free motions of the combination's plan on a layout that fits, named after its features."""
     rng = np.random.default_rng(seed)
-    for _ in range(50):
+    for _ in range(LAYOUT_TRIALS):
         layout = layout_plan(combination.contacts, combination.labels, size, ball_mm, rng)
         if layout is not None:
-            features = layout.features()
-            free = null_space(plan_jacobian(features, layout.touches), size)
-            return "; ".join(free_motion_names(free)) if len(free) else ""
+            problem = plan_problem(layout.features(), layout.touches)
+            nominal = SimpleNamespace(jacobian=problem.sensor_rows(np.eye(3), np.zeros(3))[1],
+                                      rotation=np.eye(3), translation=np.zeros(3))
+            return "; ".join(free_motions(problem, nominal))
     return ""
 
 
@@ -119,5 +122,5 @@ def design(combination: Combination, size: float = DEFAULT_SIZE_MM, ball_mm: flo
                              "with room for the sensors: give a larger --size")
         freedom = remaining_freedom(combination, values["size"], values["sensor_ball"], seed)
         raise InputError(f"{' '.join(combination.tokens())} does not locate the part: {lowest} "
-                         f"freedom{'s' if lowest > 1 else ''} remain ({freedom})")
+                         f"{'freedoms remain' if lowest > 1 else 'freedom remains'} ({freedom})")
     return Design(combination, layout, seed, **{k.replace("_", "-"): v for k, v in values.items()})

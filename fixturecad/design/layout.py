@@ -170,11 +170,15 @@ class Layout:
         return self.size**2 * self.thickness + sum(piece.volume() for piece in self.pieces)
 
 
+def plan_problem(features, entries) -> Problem:
+    """The stacked contact rows of a touch plan made at the nominal pose."""
+    touches, contacts = plan_touches(entries, np.eye(4))
+    return Problem(build_groups({f.id: f for f in features}, touches, contacts=contacts))
+
+
 def plan_jacobian(features, entries) -> np.ndarray:
     """The twist Jacobian (m, 6) of a touch plan at its nominal pose: the contact model's rows."""
-    touches, contacts = plan_touches(entries, np.eye(4))
-    groups = build_groups({f.id: f for f in features}, touches, contacts=contacts)
-    return Problem(groups).sensor_rows(np.eye(3), np.zeros(3))[1]
+    return plan_problem(features, entries).sensor_rows(np.eye(3), np.zeros(3))[1]
 
 
 def plan_mobility(features, entries, length_mm) -> tuple[int, float]:
