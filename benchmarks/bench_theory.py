@@ -18,6 +18,7 @@ COMMANDS = {
     "fixturecad --help": ["--help"],
     "fixturecad catalog --format json": ["catalog", "--format", "json"],
     "fixturecad analyze PL/F-PL/F P/F-S/M P/F-PL/M L/M-L/M": ["analyze", "PL/F-PL/F", "P/F-S/M", "P/F-PL/M", "L/M-L/M"],
+    "fixturecad analyze (cube 3-2-1 with labels)": ["analyze"] + ["P/F-PL/M@a"] * 3 + ["P/F-PL/M@b"] * 2 + ["P/F-PL/M@c"],
 }
 
 

@@ -30,6 +30,7 @@ from .ambiguity import features_beyond_tolerance, robust_flag, separating_touch
 from .motions import free_motions
 from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 from .problem import Problem
+from .redundancy import redundancy
 from .solve import solve
 from .touches import build_groups
 from .uncertainty import covariance, sigmas
@@ -63,12 +64,13 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     ``separating_touch`` (ambiguous: where one more touch tells the candidates
     apart), ``flagged`` (inconsistent: the touch left out, e.g. mislabelled),
     ``inadmissible`` (touches off their patch or touched from inside at
-    ``pose``), ``touches``, ``rows``, ``rank``.
+    ``pose``), ``touches``, ``rows``, ``rank``, ``redundancy`` (how well the
+    touches check each other, :mod:`.redundancy`).
     """
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
     problem = Problem(groups, sigma_mm, lever_mm, tolerance)
     if not problem.groups:
-        raise ValueError("no touches given")
+        raise ValueError("no touches given: every feature's list of touches is empty")
     solutions = solve(problem, initial_pose)
     best = solutions[0]
     result = {"flagged": [], "fixture_flagged": [], "free_motions": [], "separating_touch": None}
@@ -115,6 +117,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "touches": int(sum(g.count for g in groups)),
             "rows": problem.size,
             "rank": best.rank,
+            "redundancy": redundancy(problem, best),
         }
     )
     return result

@@ -19,6 +19,7 @@ from .elements import CORE_WORDS, element, perpendicular_basis
 from .mobility import matrix_rank, null_space
 
 COLLINEAR_MM = 1e-6  # touches this close to the line through the first and last lie on it
+PARALLEL_COS = 1e-9  # 1 - |cos| below which an axis is parallel to a named direction
 
 
 def _rotation(p, d):
@@ -51,31 +52,58 @@ def _candidates(points, lines, planes):
     return [(words, np.array(algebra)) for _, words, algebra in out]
 
 
+def core_symmetry(feature, name) -> tuple:
+    """(words, algebra (k, 6)) of the motions that carry a feature onto itself: {S_o} about a point
+    core (a point, a sphere's centre), {C_u} along a line core (a line, a cylinder's axis), {G_P} in a plane."""
+    core, anchor, direction, _ = feature.core()
+    if core == "point":
+        return f"spherical motion {{S_o}} about {name}", np.array([_rotation(anchor, e) for e in np.eye(3)])
+    if core == "line":
+        return f"cylindrical motion {{C_u}} along {name}", np.array([_rotation(anchor, direction), _translation(direction)])
+    e1, e2 = perpendicular_basis(direction)
+    return f"planar motion {{G_P}} in the plane of {name}", np.array(
+        [_rotation(anchor, direction), _translation(e1), _translation(e2)])
+
+
 def _vec(v, digits=3):
     """Coordinates in words, rounding off what is zero but for rounding (no -0)."""
     v = np.where(np.abs(v) < 1e-9 * max(np.abs(v).max(), 1.0), 0.0, v) + 0.0
     return "(" + ", ".join(f"{x:.{digits}g}" for x in v) + ")"
 
 
-def screw_words(twist) -> str:
-    """A twist in words: a translation, a rotation (pitch 0) or a screw with its pitch (mm/rad)."""
+def screw_words(twist, directions=None) -> str:
+    """A twist in words: a translation, a rotation (pitch 0) or a screw with its pitch (mm/rad).
+
+    ``directions`` {name: unit (3,)}: a direction parallel to one is given by
+    that name alone (the coordinates of a random example mean nothing).
+    """
     w, v = twist[:3], twist[3:]
     if np.linalg.norm(w) < 1e-9 * max(np.linalg.norm(v), 1e-300):
-        return f"translation {{T_u}} along {_vec(v / np.linalg.norm(v))}"
+        return f"translation {{T_u}} {_along(v / np.linalg.norm(v), directions)}"
     pitch = float(w @ v / (w @ w))
     point = np.cross(w, v) / (w @ w)
     d = w / np.linalg.norm(w)
+    axis = _along(d, directions)
+    axis = f"the axis through {_vec(point, 4)} mm {axis}" if axis.startswith("along (") else f"an axis {axis}"
     if abs(pitch) < 1e-9:
-        return f"rotation {{R_u}} about the axis through {_vec(point, 4)} mm along {_vec(d)}"
-    return f"screw motion of pitch {pitch:.4g} mm/rad about the axis through {_vec(point, 4)} mm along {_vec(d)}"
+        return f"rotation {{R_u}} about {axis}"
+    return f"screw motion of pitch {pitch:.4g} mm/rad about {axis}"
 
 
-def free_motion_names(free, points=None, lines=None, planes=None, length_mm=None) -> list:
+def _along(d, directions):
+    for name, u in (directions or {}).items():
+        if abs(float(np.dot(d, u))) > 1.0 - PARALLEL_COS:
+            return f"parallel to {name}"
+    return f"along {_vec(d)}"
+
+
+def free_motion_names(free, points=None, lines=None, planes=None, length_mm=None, directions=None) -> list:
     """Names of the motions spanned by the free twists (m, 6), relative to named geometry.
 
     ``points`` {name: (3,)}, ``lines`` {name: (point (3,), unit direction (3,))},
     ``planes`` {name: (point (3,), unit normal (3,))}, in the twists' frame.
     ``length_mm`` balances rotation and translation in the rank tests.
+    ``directions`` {name: unit (3,)} name the axes of what is left (:func:`screw_words`).
     """
     free = np.asarray(free, float).reshape(-1, 6)
     dim = len(free)
@@ -96,7 +124,7 @@ def free_motion_names(free, points=None, lines=None, planes=None, length_mm=None
         # What the named geometry does not explain: the screws of the twists left.
         remaining = free - (free @ covered.T) @ covered if len(covered) else free
         for twist in np.linalg.svd(remaining, full_matrices=False)[2][: dim - len(covered)]:
-            words.append(screw_words(twist))
+            words.append(screw_words(twist, directions))
     return words
 
 

@@ -152,6 +152,8 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=
         if feature_id not in features:
             raise ValueError(f"unknown feature {feature_id!r}; features are {', '.join(features)}")
         pts = np.asarray(points, dtype=np.float64)
+        if pts.size == 0:
+            continue  # no touches on this feature
         if pts.ndim == 1 and pts.size == 3:
             pts = pts[None]
         if pts.ndim != 2 or pts.shape[1] != 3:
@@ -160,8 +162,6 @@ def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=
             raise ValueError(f"touches on {feature_id} must be finite, got NaN or inf")
         if np.abs(pts).max(initial=0.0) > MAX_COORDINATE_MM:
             raise ValueError(f"touches on {feature_id} lie beyond {MAX_COORDINATE_MM:g} mm: check the units")
-        if len(pts) == 0:
-            continue
         ids = np.arange(index, index + len(pts))
         index += len(pts)
         group = point_touches(features[feature_id], pts, ids, ball_radius_mm)

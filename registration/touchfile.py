@@ -339,10 +339,30 @@ def format_result(result, pose_format="matrix"):
     if result["inadmissible"]:
         named = [rows[i] if rows else f"touch {i}" for i in result["inadmissible"]]
         lines.append("off its patch or touched from inside at this pose: " + ", ".join(named))
+    lines.extend(_checked_lines(result, rows))
     if result["separating_touch"]:
         s = result["separating_touch"]
         lines.append(f"separating touch: {s['feature']} at {s['point_meas_mm']} (separates by {s['separation_mm']:.3f} mm)")
     return "\n".join(lines)
+
+
+def _checked_lines(result, rows):
+    """How well the touches check each other, in words (see :mod:`.redundancy`)."""
+    check = result.get("redundancy")
+    if not check or result["status"] == "underdetermined":
+        return []
+    named = [rows[i] if rows else f"touch {i}" for i in check["unchecked"]]
+    if check["rows_beyond_six"] == 0:
+        return ["checked: none (no rows beyond the six a pose needs): a wrong touch would go unnoticed"]
+    found = [d for d in check["detectable_mm"] if d is not None]
+    extra = check["rows_beyond_six"]
+    line = f"checked: {extra} row{'s' if extra > 1 else ''} beyond the six a pose needs"
+    if found:
+        line += f"; an error of {max(found):.3f} mm in any checked touch is found"
+    lines = [line]
+    if named:
+        lines.append("not checked by the others (a wrong one would go unnoticed): " + ", ".join(named))
+    return lines
 
 
 def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEFAULT_SIGMA_MM,

@@ -178,3 +178,17 @@ def test_build_help_shows_the_default_folder_and_the_parameters():
     assert "out/<template>-<parameters>" in text
     assert "quarter-sphere: --radius 40 mm (5..500)" in text
     assert "--lever" in run("register", "--help").stdout and "20.0" in run("register", "--help").stdout
+
+
+def test_empty_touch_lists_are_no_touches(built):
+    """register({"left": []}): a clear error, not a numpy shape; empty lists beside others are skipped."""
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.features import features_from_json
+
+    features = features_from_json(json.loads((built("cube") / "features.json").read_text()))
+    with pytest.raises(ValueError, match="no touches given"):
+        register_touches(features, {"left": []})
+    touches = {"top": [[10, 10, 50], [40, 10, 50], [25, 40, 50]], "front": [[10, 0, 25], [40, 0, 25]], "left": []}
+    result = register_touches(features, touches)
+    assert result["status"] == "underdetermined" and result["touches"] == 5
+    assert result["free_motions"] == ["translation {T_u} along the normal of left"]

@@ -102,14 +102,20 @@ def _progress_stream(wanted: bool):
 
 @app.command()
 def analyze(
-    names: Annotated[list[str], typer.Argument(help="Contacts, e.g. PL/F-PL/F P/F-S/M P/F-PL/M L/M-L/M.")],
+    names: Annotated[list[str], typer.Argument(help="Contacts, e.g. PL/F-PL/F P/F-S/M P/F-PL/M L/M-L/M; a label "
+                                                    "after @ (P/F-PL/M@a) puts contacts on one fixture feature.")],
+    target_dim: Annotated[int | None, typer.Option(help="Freedoms the contacts should leave (0 to 5).")] = None,
     fmt: FormatOption = Format.table,
 ):
-    """Whether a set of contacts locates the part, and what freedom remains if not."""
+    """Whether a set of contacts locates the part, and what freedom remains if not.
+
+    With feature labels, sensor first (the cube's 3-2-1 is P/F-PL/M@a x3, P/F-PL/M@b x2, P/F-PL/M@c), the
+    concrete structure is analysed: its mobility, redundant contacts, and the special positions that lose rank.
+    """
     from fixturecad.theory.analysis import analyze as analyze_contacts
 
     try:
-        result = analyze_contacts(names)
+        result = analyze_contacts(names, target_dim)
     except ValueError as error:
         raise InputError(str(error)) from None
     if fmt is Format.json:
@@ -123,4 +129,7 @@ def analyze(
         {"property": "redundant", "value": ", ".join(result.redundant) or "none"},
         {"property": "in catalogue", "value": result.in_catalog},
     ] + [{"property": "free motion", "value": text} for text in result.freedom]
+    rows += [{"property": "loses rank when", "value": text} for text in result.special_positions]
+    if result.target is not None:
+        rows.append({"property": "target", "value": result.target})
     typer.echo(render(rows, ["property", "value"], fmt))

@@ -39,7 +39,9 @@ class Filters:
     fixture: frozenset | None = None
     mobile_only: bool = False
 
-    def allows(self, ctype) -> bool:
+    def orient(self, ctype):
+        """The contact written sensor first as the filters allow it (Table I's order when both
+        orientations are allowed), or None."""
         for orientation in (ctype, ctype.swapped()):
             if self.sensor is not None and orientation.sensor not in self.sensor:
                 continue
@@ -47,8 +49,11 @@ class Filters:
                 continue
             if self.mobile_only and orientation.fixture_fixed:
                 continue
-            return True
-        return False
+            return orientation
+        return None
+
+    def allows(self, ctype) -> bool:
+        return self.orient(ctype) is not None
 
 
 @dataclass
@@ -80,7 +85,7 @@ def allowed_contacts(filters: Filters) -> dict[str, list[str]]:
     """Contacts of each class that the filters allow, classes with none left out."""
     out = {}
     for name, entries in classes().items():
-        names = [entry.name for entry in entries if filters.allows(entry.ctype)]
+        names = [filters.orient(entry.ctype).name for entry in entries if filters.allows(entry.ctype)]
         if names:
             out[name] = names
     return out
