@@ -13,6 +13,11 @@ from .defaults import MAX_COORDINATE_MM
 from .elements import element, outward
 from .noise import placement_centre
 
+# Sensor keys beyond the element's own, by kind: a fixed plane's known contact line with a line, a
+# cylinder or a plane (the contact model's ``e``).
+EXTRA_SENSOR_KEYS = {"plane": {"line": "e"}}
+
+
 @dataclass
 class TouchGroup:
     """Touches of one contact type on one feature.
@@ -84,9 +89,7 @@ def sensor_geometry(ctype, sensor, contact_point=None):
     if "kind" not in sensor:
         geometry = {key: np.asarray(value, dtype=np.float64) for key, value in sensor.items()}
     else:
-        names = dict(element(sensor["kind"]).keys)
-        if sensor["kind"] == "plane":
-            names["line"] = "e"  # a fixed plane's known contact line with a line, a cylinder or a plane
+        names = {**dict(element(sensor["kind"]).keys), **EXTRA_SENSOR_KEYS.get(sensor["kind"], {})}
         geometry = {names[key]: np.asarray(value, dtype=np.float64) for key, value in sensor.items() if key in names}
         for key in ("n", "d", "e"):
             if key in geometry:
@@ -109,6 +112,19 @@ def sensor_geometry(ctype, sensor, contact_point=None):
             if el.core == "line":
                 geometry["m"] = geometry["u"]
     return geometry
+
+
+def laid_sensor(kind, point, normal, tangent, radius_mm) -> dict:
+    """A sensor of element ``kind`` (a letter) touching a surface at ``point`` from outside (outward unit
+    ``normal`` there), in the touch-plan form: a probe point; a ball or a cylinder (its axis along the
+    unit ``tangent``) one ``radius_mm`` out; a plane tangent there; a line along ``tangent``."""
+    point, normal, tangent = (np.asarray(v, dtype=np.float64) for v in (point, normal, tangent))
+    return {"P": lambda: {"kind": "point", "point": point},
+            "S": lambda: {"kind": "sphere", "center": point + radius_mm * normal, "radius": radius_mm},
+            "PL": lambda: {"kind": "plane", "point": point, "normal": -normal},
+            "L": lambda: {"kind": "line", "point": point, "direction": tangent},
+            "C": lambda: {"kind": "cylinder", "point": point + radius_mm * normal, "axis": tangent,
+                          "radius": radius_mm}}[kind]()
 
 
 def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fixture=None,

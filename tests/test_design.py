@@ -78,7 +78,7 @@ def test_a_designed_fixture_builds_and_registers(contact_class, tmp_path):
 
 @pytest.mark.parametrize("args, words", [
     (["P/F-XL/M"], ["cannot read contact"]),
-    (["P/F-PL/M@a", "P/F-S/M@a"], ["label a", "two element kinds"]),
+    (["P/F-PL/M@a", "P/F-S/M@a"], ["label 'a'", "one fixture element"]),
     (["P/F-PL/M@a"] * 6, ["does not locate", "3 freedoms", "planar motion {G_P} in the plane of a"]),
     (["--class", "{S-S}x3 {S-T2}x3", "--size", "5"], ["--size"]),
     (["--class", "{S-S}"], ["not a class of Table V"]),

@@ -14,10 +14,11 @@ from fixturecad.errors import InputError
 from fixturecad.registration.contacts import ContactType
 from fixturecad.design.layout import FEATURE_NAMES
 from fixturecad.theory.catalogue import CLASSES, classes, lookup
+from fixturecad.theory.structure import parse_labelled
 
 SENSOR_PREFERENCE = ("P", "S", "PL", "L", "C")  # what a cell most likely holds first
 FIXTURE_PREFERENCE = ("PL", "S", "C", "L", "P")  # what prints best first
-LABEL = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
+LABEL = re.compile(r"^[a-z][a-z0-9_]{0,30}$")  # a features.json id
 
 
 @dataclass
@@ -48,33 +49,25 @@ def plan_gap(ctype: ContactType) -> str:
 
 
 def parse(tokens) -> Combination:
-    """``["P/F-PL/M@a", "S/M-S/M"]`` -> Combination; InputError (one line) for anything unreadable.
-
-    An unlabelled contact gets a feature of its own.
-    """
-    contacts, labels = [], []
-    for number, token in enumerate(tokens, start=1):
-        text, _, label = token.partition("@")
-        try:
-            ctype = ContactType.parse(text)
-            lookup(ctype.name)
-        except ValueError as error:
-            raise InputError(str(error).split("; valid")[0]) from None
-        if label and not LABEL.match(label):
-            raise InputError(f"cannot read label {label!r} of {token!r}: a letter, then letters, digits or _")
-        gap = plan_gap(ctype)
-        if gap:
-            raise InputError(gap)
-        contacts.append(ctype)
-        labels.append(label or f"{FEATURE_NAMES[ctype.fixture]}_{number}")
-    for label in set(labels):
-        kinds = {c.fixture for c, l in zip(contacts, labels) if l == label}
-        if len(kinds) > 1:
-            raise InputError(f"label {label} is on two element kinds ({' and '.join(sorted(kinds))}): "
-                             "one label is one fixture element")
-    if not contacts:
+    """``["P/F-PL/M@a", "S/M-S/M"]`` -> Combination; InputError (one line) for anything unreadable
+    (:func:`~fixturecad.theory.structure.parse_labelled`). An unlabelled contact gets a feature of its own."""
+    if not tokens:
         raise InputError("give contacts (e.g. P/F-PL/M@a) or --class")
-    return Combination(contacts, labels)
+    try:
+        parsed = parse_labelled(tokens)
+        for ctype, _ in parsed:
+            lookup(ctype.name)
+    except ValueError as error:
+        raise InputError(str(error).split("; valid")[0]) from None
+    labels = []
+    for number, (ctype, label) in enumerate(parsed, start=1):
+        if label is not None and not LABEL.match(label):
+            raise InputError(f"cannot read label {label!r}: a lower-case letter, then lower-case letters, digits or _ "
+                             "(it names the feature in features.json)")
+        if plan_gap(ctype):
+            raise InputError(plan_gap(ctype))
+        labels.append(label or f"{FEATURE_NAMES[ctype.fixture]}_{number}")
+    return Combination([ctype for ctype, _ in parsed], labels)
 
 
 def preferred_contact(member: str) -> ContactType:

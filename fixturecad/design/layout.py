@@ -35,7 +35,7 @@ from fixturecad.registration.features import Cylinder, Extent, Line, Plane, Poin
 from fixturecad.registration.mobility import matrix_rank
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.synthetic import plan_touches
-from fixturecad.registration.touches import build_groups
+from fixturecad.registration.touches import build_groups, laid_sensor
 
 MIN_ELEVATION_DEG = 40.0  # stalks rise at least this far above the base top: every head is seen from above
 MIN_APPROACH_Z = 0.15  # a touch's outward normal climbs at least this much: the sensor comes from above
@@ -242,35 +242,22 @@ def touch_spot(piece: Piece, index: int, count: int, rng) -> tuple[np.ndarray, n
 
 
 def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, rng) -> dict:
-    """One touch-plan entry: a sensor element of ``ctype`` touching ``feature`` at ``point``.
-
-    The sensor lies outside the material, against the outward ``normal``: a ball
-    or a cylinder one radius out, a plane tangent there, a line tangent to the
-    surface (crossing an edge, lying in a face).
-    """
+    """One touch-plan entry: a sensor element of ``ctype`` touching ``feature`` at ``point`` from the
+    outward ``normal``'s side (:func:`~fixturecad.registration.touches.laid_sensor`); a line or a
+    cylinder sensor lies across an edge, round a boss, or anywhere in a face or on a ball."""
     entry = {"contact": ctype.name, "feature": feature.id, "points": [[float(v) for v in point]]}
+    if ctype.sensor == "P" and not ctype.fixture_fixed:
+        return entry  # a plain probe touch
     axis = feature.axis if feature.kind == "cylinder" else feature.direction if feature.kind == "line" else None
-    if axis is not None:
-        tangent = np.cross(axis, normal)  # across the edge, or round the boss
-        tangent = _unit(_rotate(tangent, normal, math.radians(rng.uniform(-35.0, 35.0)))) \
-            if feature.kind == "cylinder" else _unit(tangent)
+    if axis is None:
+        tangent = _rotate(perpendicular_basis(normal)[0], normal, rng.uniform(0, 2 * math.pi))
     else:
-        tangent = _unit(_rotate(perpendicular_basis(normal)[0], normal, rng.uniform(0, 2 * math.pi)))
-    kind = ctype.sensor
-    if kind == "P":
-        if ctype.fixture_fixed:
-            entry["sensor"] = {"kind": "point", "point": entry["points"][0]}
-        return entry
-    if kind == "S":
-        sensor = {"kind": "sphere", "center": point + ball_mm * normal, "radius": ball_mm}
-    elif kind == "PL":
-        sensor = {"kind": "plane", "point": point, "normal": -normal}
-        if ctype.sensor_fixed and axis is not None:
-            sensor["line"] = axis  # where on the plane the line or the boss lies is known
-    elif kind == "L":
-        sensor = {"kind": "line", "point": point, "direction": tangent}
-    else:
-        sensor = {"kind": "cylinder", "point": point + ball_mm * normal, "axis": tangent, "radius": ball_mm}
+        tangent = _unit(np.cross(axis, normal))  # across the edge, or round the boss
+        if feature.kind == "cylinder":
+            tangent = _rotate(tangent, normal, math.radians(rng.uniform(-35.0, 35.0)))
+    sensor = laid_sensor(ctype.sensor, point, normal, tangent, ball_mm)
+    if ctype.sensor == "PL" and ctype.sensor_fixed and axis is not None:
+        sensor["line"] = axis  # where on the plane the line or the boss lies is known
     entry["sensor"] = {key: value if isinstance(value, (str, float)) else [float(v) for v in value]
                        for key, value in sensor.items()}
     return entry
