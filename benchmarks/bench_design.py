@@ -57,7 +57,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args()
     from fixturecad.design.combination import for_class
-    from fixturecad.design.fixture import DEFAULT_BALL_MM, DEFAULT_SIZE_MM, DESIGN_SEED
+    from fixturecad.design import DEFAULT_BALL_MM, DEFAULT_SIZE_MM, DESIGN_SEED
     from fixturecad.design.layout import best_layout
     from fixturecad.theory.enumeration import enumerate_classes
 

@@ -5,6 +5,7 @@ from typing import Annotated
 
 import typer
 
+from fixturecad.design import DEFAULT_BALL_MM, DEFAULT_SIZE_MM, DESIGN_SEED
 from fixturecad.errors import InputError
 
 app = typer.Typer()
@@ -18,11 +19,11 @@ def design(
         show_default=False)] = None,
     contact_class: Annotated[str | None, typer.Option(
         "--class", help='A class of Table V instead, e.g. "{S-S}x3 {S-T2}x3": a combination of it is chosen.')] = None,
-    size: Annotated[float, typer.Option(help="Side of the base block, mm.")] = 100.0,
-    sensor_ball: Annotated[float, typer.Option(help="Radius of ball and cylinder sensors, mm.")] = 3.0,
+    size: Annotated[float, typer.Option(help="Side of the base block, mm.")] = DEFAULT_SIZE_MM,
+    sensor_ball: Annotated[float, typer.Option(help="Radius of ball and cylinder sensors, mm.")] = DEFAULT_BALL_MM,
     out: Annotated[Path | None, typer.Option(help="Output folder.", show_default="out/design-<class>-s<size>")] = None,
     force: Annotated[bool, typer.Option(help="Replace the output folder if fixturecad wrote it.")] = False,
-    seed: Annotated[int, typer.Option(help="Seed of the layout search.")] = 9,
+    seed: Annotated[int, typer.Option(help="Seed of the layout search.")] = DESIGN_SEED,
 ):
     """Design and build a fixture that realises a contact combination: what `build` writes, and the
     combination and class in features.json."""

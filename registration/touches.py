@@ -133,10 +133,10 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
 
     ``sensor`` see :func:`sensor_geometry`; ``fixture`` optional extra
     fixture-frame keys of a fixed fixture side (its known contact point ``o``).
-    ``rho`` (mm) defaults to the sum of the radii of the two elements, the
-    offset of two convex elements touching from outside (a ball tip on a
-    plane: its radius; on a sphere: both radii; a plane sensor on a cylinder:
-    the cylinder's radius).
+    ``rho`` (mm) defaults to the offset of two convex elements touching from
+    outside: the sum of the radii of the mobile sides (a ball tip on a plane:
+    its radius; on a sphere: both radii; a fixed ball's known point on a
+    mobile plane: 0; a plane sensor on a cylinder: the cylinder's radius).
     """
     ctype = ContactType.parse(contact)
     if ctype.fixture != feature.element:
@@ -152,7 +152,10 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
             extra["m"] = extra["u"]  # the known contact line's side of the axis
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
     if rho is None:
-        rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(feature.core()[3])
+        # From a side's known surface point to the other's mobile core, that core's radius; between two
+        # mobile cores, or a line's or a cylinder's axis above a plane, both radii.
+        radii = (float(np.reshape(geometry.get("r", 0.0), -1)[0]), float(feature.core()[3]))
+        rho = sum(r for r, fixed in zip(radii, (ctype.sensor_fixed, ctype.fixture_fixed)) if ctype.is_locus or not fixed)
     centre = placement_centre(ctype.sensor, geometry, None if contact_point is None else np.reshape(contact_point, (1, 3)))
     return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre)
 

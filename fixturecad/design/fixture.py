@@ -14,14 +14,12 @@ from fixturecad.errors import InputError
 from fixturecad.registration.datums import DatumScheme
 from fixturecad.registration.features import Extent, Plane
 from fixturecad.registration.motions import free_motions
+from fixturecad.design import DEFAULT_BALL_MM, DEFAULT_SIZE_MM, DESIGN_SEED
 from fixturecad.design.combination import Combination
-from fixturecad.design.layout import (CLEARANCE_MM, LAYOUT_TRIALS, MIN_SIZE_MM, Layout, best_layout, layout_plan,
-                                      plan_problem)
+from fixturecad.design.layout import (LAYOUT_TRIALS, MIN_SIZE_MM, Layout, best_layout, layout_plan, plan_problem,
+                                      rim_points)
 from fixturecad.templates.base import Param, Plan, Template, box_halfspaces, touch
 
-DEFAULT_SIZE_MM = 100.0
-DEFAULT_BALL_MM = 3.0
-DESIGN_SEED = 9
 
 
 class Design(Template):
@@ -74,15 +72,17 @@ class Design(Template):
 
     def touch_plans(self) -> dict:
         s, t = self.size, self.layout.thickness
-        corner = 0.5 * s - CLEARANCE_MM - 0.05 * s  # the block's rim, clear of every stalk
         probe = [
-            touch("P/F-PL/M", "datum_top", [[-corner, -corner, 0], [corner, -corner, 0], [-corner, corner, 0]]),
+            touch("P/F-PL/M", "datum_top", rim_points(s)),
             touch("P/F-PL/M", "datum_front", [[-0.4 * s, -s / 2, -t / 2], [0.4 * s, -s / 2, -t / 2]]),
             touch("P/F-PL/M", "datum_left", [-s / 2, 0, -t / 2]),
         ]
+        tokens = " ".join(self.combination.tokens())
         return {
-            "default": Plan(self.contact_class, self.layout.touches,
-                            f"{' '.join(self.combination.tokens())}: one touch per contact"),
+            "default": Plan(self.contact_class, self.layout.touches + self.layout.checks,
+                            f"{tokens}, each contact touched twice: the second touches pick one of the poses "
+                            "the first allow"),
+            "minimal": Plan(self.contact_class, self.layout.touches, f"{tokens}: one touch per contact"),
             "point-probe": Plan("{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}", probe, "a point probe alone: 3-2-1 on the block"),
         }
 

@@ -25,7 +25,7 @@ scaled Jacobian) is kept.
 """
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -154,10 +154,10 @@ class Layout:
 
     size: float
     pieces: list
-    touches: list  # touch-plan entries (templates.base.touch form)
+    touches: list  # touch-plan entries (templates.base.touch form): one per contact
+    checks: list  # a second touch of each contact elsewhere on its feature: what makes the pose unique
     margin: float = 0.0
     mobility: int = 6
-    extra: dict = field(default_factory=dict)
 
     @property
     def thickness(self) -> float:
@@ -301,8 +301,17 @@ def _place(groups, size, rng) -> list:
     return pieces if _fits(pieces, size) else None
 
 
+def rim_points(size) -> np.ndarray:
+    """Three points on the block's top face near its corners (the point-probe plan's primary touches), mm."""
+    corner = 0.45 * size - CLEARANCE_MM
+    return np.array([[-corner, -corner, 0.0], [corner, -corner, 0.0], [-corner, corner, 0.0]])
+
+
 def _fits(pieces, size) -> bool:
-    """Every piece inside the block's footprint, clear of the others, its head above the block."""
+    """Every piece inside the block's footprint, clear of the others and of the rim touches seen from
+    above, its head above the block."""
+    if not all(_reachable(point, np.array([0.0, 0.0, 1.0]), None, pieces, size) for point in rim_points(size)):
+        return False
     thickness = BASE_THICKNESS * size
     for piece in pieces:
         w_xy = math.hypot(piece.w[0], piece.w[1])
@@ -344,14 +353,16 @@ def layout_plan(contacts, labels, size, ball_mm, rng):
     by_id = {piece.id: piece for piece in pieces}
     features = {piece.id: piece.feature() for piece in pieces}
     seen = {fid: 0 for fid in order}
-    entries = []
+    entries, checks = [], []
     for ctype, fid in zip(contacts, labels):
-        point, normal = touch_spot(by_id[fid], seen[fid], labels.count(fid), rng)
+        count = labels.count(fid)
+        for index, plan in ((seen[fid], entries), (seen[fid] + count, checks)):
+            point, normal = touch_spot(by_id[fid], index, 2 * count, rng)
+            if not _reachable(point, normal, fid, pieces, size):
+                return None
+            plan.append(sensor_entry(ctype, features[fid], point, normal, ball_mm, rng))
         seen[fid] += 1
-        if not _reachable(point, normal, fid, pieces, size):
-            return None
-        entries.append(sensor_entry(ctype, features[fid], point, normal, ball_mm, rng))
-    return Layout(size, pieces, entries)
+    return Layout(size, pieces, entries, checks)
 
 
 def best_layout(contacts, labels, size, ball_mm, seed, keep=LAYOUTS_COMPARED, trials=LAYOUT_TRIALS):
