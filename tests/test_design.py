@@ -83,6 +83,7 @@ def test_a_designed_fixture_builds_and_registers(contact_class, tmp_path):
     (["--class", "{S-S}x3 {S-T2}x3", "--size", "5"], ["--size"]),
     (["--class", "{S-S}"], ["not a class of Table V"]),
     (["C/M-PL/F"], ["contact line", "PL/F-C/M"]),
+    ([], ["give either contacts"]),
 ])
 def test_bad_input_is_one_line_and_writes_nothing(args, words, tmp_path):
     assert_bad_input(run("design", *args, cwd=tmp_path), *words)
