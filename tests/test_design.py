@@ -88,3 +88,32 @@ def test_a_designed_fixture_builds_and_registers(contact_class, tmp_path):
 def test_bad_input_is_one_line_and_writes_nothing(args, words, tmp_path):
     assert_bad_input(run("design", *args, cwd=tmp_path), *words)
     assert not (tmp_path / "out").exists()
+
+
+def test_every_contact_a_plan_can_make_holds_at_the_pose_it_was_made_at():
+    """Both orientations of the 41 contacts (those a plan can make): the touch, made by its sensor at a
+    random pose, has zero rows at that pose and the rank of its dimension in Table III."""
+    from fixturecad.design.combination import plan_gap
+    from fixturecad.design.layout import layout_plan
+    from fixturecad.registration.pose import random_rotation
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.synthetic import plan_touches
+    from fixturecad.registration.touches import build_groups
+    from fixturecad.theory.catalogue import catalogue
+
+    rng = np.random.default_rng(3)
+    for entry in catalogue():
+        for ctype in {entry.ctype, entry.ctype.swapped()}:
+            if plan_gap(ctype):
+                continue
+            layout = None
+            while layout is None:
+                layout = layout_plan([ctype], ["f"], SIZE_MM, BALL_MM, rng)
+            R, t = random_rotation(rng), rng.uniform(-300, 300, 3)
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = R, t
+            touches, contacts = plan_touches(layout.touches, pose)
+            problem = Problem(build_groups({f.id: f for f in layout.features()}, touches, contacts=contacts))
+            values, J = problem.sensor_rows(R, t)
+            assert np.abs(values).max() < 1e-9, ctype.name
+            assert matrix_rank(J, SIZE_MM) == 6 - entry.dim, ctype.name
