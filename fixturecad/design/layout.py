@@ -37,7 +37,7 @@ from fixturecad.registration.problem import Problem
 from fixturecad.registration.synthetic import plan_touches
 from fixturecad.registration.touches import build_groups, laid_sensor
 
-MIN_ELEVATION_DEG = 40.0  # stalks rise at least this far above the base top: every head is seen from above
+MIN_ELEVATION_DEG = 45.0  # stalks rise at least this steeply: seen from above, printed without support
 MIN_APPROACH_Z = 0.15  # a touch's outward normal climbs at least this much: the sensor comes from above
 CLEARANCE_MM = 2.0  # gap kept between pieces above the base, and between an approach ray and a piece
 BASE_THICKNESS = 0.25  # of the size
