@@ -14,6 +14,7 @@ import typer
 from fixturecad import __version__
 
 from fixturecad.calibration_commands import app as calibration_app
+from fixturecad.design_commands import app as design_app
 from fixturecad.errors import InputError
 from fixturecad.fixture_commands import app as fixture_app
 from fixturecad.registration_commands import app as registration_app
@@ -26,7 +27,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-for group in (theory_app, fixture_app, registration_app, calibration_app):
+for group in (theory_app, fixture_app, design_app, registration_app, calibration_app):
     app.add_typer(group)
 
 

@@ -55,6 +55,7 @@ def document(template, files: dict, fixture_tolerance_mm: float) -> dict:
         "files": files,
         "features": [feature.to_json() for feature in template.features()],
         "plans": {name: plan.to_json() for name, plan in plans.items()},
+        **template.extras(),
     }
 
 

@@ -161,6 +161,13 @@ def suggest(
             rows.append({"template": cls.name, "plan": name, "class": plan.contact_class,
                          "build": f"fixturecad build {cls.name} {options}", "note": plan.note})
     if not rows:
-        typer.echo(f"no template realises {contact_class}; see `fixturecad templates` for the classes they do")
-        return
+        from fixturecad.design.combination import in_table_five
+
+        if not in_table_five(wanted):
+            typer.echo(f"no template realises {contact_class}, and it is not a class of Table V; "
+                       "see `fixturecad templates` for the classes they do")
+            return
+        name = "".join("{" + member + "}" for member in wanted)
+        rows.append({"template": "design", "plan": "default", "class": name,
+                     "build": f'fixturecad design --class "{name}"', "note": "no template realises it: a designed fixture"})
     typer.echo(render(rows, ["template", "plan", "class", "build", "note"], fmt))

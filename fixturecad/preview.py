@@ -86,7 +86,7 @@ def fixture_scene(template, features, matches: dict, parts) -> dict:
     views = tuple(view_from_direction(d) for d in template.VIEW_DIRECTIONS)
     label_normals = {row["id"]: row["normal"] for row in feature_rows}
     sensors = [{**_sensor_drawing(entry["sensor"], 0.35 * _span(parts)), "normal": label_normals[entry["feature"]]}
-               for entry in plan.touches if "sensor" in entry]
+               for entry in plan.touches if entry.get("sensor", {}).get("kind") in ("plane", "line", "cylinder")]
     return scene(title, faces, feature_rows, touches, views, sensors)
 
 
@@ -105,10 +105,11 @@ def _label_place(nodes, touch_points, clearance):
 
 
 def _sensor_drawing(sensor: dict, size: float) -> dict:
-    """A non-point sensor of the plan as something to draw: a square of the plane or a segment of the line."""
+    """A plane, line or cylinder sensor of the plan as something to draw: a square of the plane, a segment
+    of the line or of the cylinder's axis (a ball's touch is drawn as its touch)."""
     point = np.array(sensor["point"])
-    if sensor["kind"] == "line":
-        d = np.array(sensor["direction"])
+    if sensor["kind"] in ("line", "cylinder"):
+        d = np.array(sensor.get("direction", sensor.get("axis")))
         return {"kind": "line", "points": np.array([point - size * d, point + size * d])}
     n = np.array(sensor["normal"])
     a = np.cross(n, np.eye(3)[int(np.argmin(np.abs(n)))])

@@ -31,7 +31,7 @@ def plan_touches(entries, fixture2meas):
             for key, value in entry["sensor"].items():
                 if key in ("point", "center"):
                     sensor[key] = (R @ np.asarray(value, float) + t).tolist()
-                elif key in ("normal", "direction", "axis"):
+                elif key in ("normal", "direction", "axis", "line"):
                     sensor[key] = (R @ np.asarray(value, float)).tolist()
                 elif key != "kind":
                     sensor[key] = value

@@ -10,8 +10,13 @@ import numpy as np
 
 from .contacts import ContactType, make_side
 from .defaults import MAX_COORDINATE_MM
-from .elements import element
+from .elements import element, outward
 from .noise import placement_centre
+
+# Sensor keys beyond the element's own, by kind: a fixed plane's known contact line with a line, a
+# cylinder or a plane (the contact model's ``e``).
+EXTRA_SENSOR_KEYS = {"plane": {"line": "e"}}
+
 
 @dataclass
 class TouchGroup:
@@ -48,7 +53,7 @@ def fixture_side(feature, fixed: bool, **extra):
     geometry = el.side_geometry(feature)
     if el.letter == "P":
         fixed, geometry["o"] = True, feature.point
-    return make_side(el.letter, fixed, **geometry, **extra)
+    return make_side(el.letter, fixed, **{**geometry, **extra})
 
 
 def point_touches(feature, points, index, ball_radius_mm=0.0) -> TouchGroup:
@@ -84,9 +89,9 @@ def sensor_geometry(ctype, sensor, contact_point=None):
     if "kind" not in sensor:
         geometry = {key: np.asarray(value, dtype=np.float64) for key, value in sensor.items()}
     else:
-        names = dict(element(sensor["kind"]).keys)
+        names = {**dict(element(sensor["kind"]).keys), **EXTRA_SENSOR_KEYS.get(sensor["kind"], {})}
         geometry = {names[key]: np.asarray(value, dtype=np.float64) for key, value in sensor.items() if key in names}
-        for key in ("n", "d"):
+        for key in ("n", "d", "e"):
             if key in geometry:
                 length = np.linalg.norm(geometry[key])
                 if not length > 1e-9:
@@ -99,7 +104,27 @@ def sensor_geometry(ctype, sensor, contact_point=None):
                 raise ValueError(f"a fixed {ctype.sensor} sensor needs its contact point")
             contact_point = geometry["c"]
         geometry["o"] = np.asarray(contact_point, dtype=np.float64)
+        el = element(ctype.sensor)
+        if el.round:
+            # a fixed ball or cylinder knows its normal at the contact point, and so its contact line's side
+            core, anchor, direction, _ = el.core_of({json: geometry[side] for json, side in el.keys})
+            geometry["u"] = outward(core, anchor, direction, geometry["o"][None])[0]
+            if el.core == "line":
+                geometry["m"] = geometry["u"]
     return geometry
+
+
+def laid_sensor(kind, point, normal, tangent, radius_mm) -> dict:
+    """A sensor of element ``kind`` (a letter) touching a surface at ``point`` from outside (outward unit
+    ``normal`` there), in the touch-plan form: a probe point; a ball or a cylinder (its axis along the
+    unit ``tangent``) one ``radius_mm`` out; a plane tangent there; a line along ``tangent``."""
+    point, normal, tangent = (np.asarray(v, dtype=np.float64) for v in (point, normal, tangent))
+    return {"P": lambda: {"kind": "point", "point": point},
+            "S": lambda: {"kind": "sphere", "center": point + radius_mm * normal, "radius": radius_mm},
+            "PL": lambda: {"kind": "plane", "point": point, "normal": -normal},
+            "L": lambda: {"kind": "line", "point": point, "direction": tangent},
+            "C": lambda: {"kind": "cylinder", "point": point + radius_mm * normal, "axis": tangent,
+                          "radius": radius_mm}}[kind]()
 
 
 def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fixture=None,
@@ -108,10 +133,10 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
 
     ``sensor`` see :func:`sensor_geometry`; ``fixture`` optional extra
     fixture-frame keys of a fixed fixture side (its known contact point ``o``).
-    ``rho`` (mm) defaults to the sum of the radii of the two elements, the
-    offset of two convex elements touching from outside (a ball tip on a
-    plane: its radius; on a sphere: both radii; a plane sensor on a cylinder:
-    the cylinder's radius).
+    ``rho`` (mm) defaults to the offset of two convex elements touching from
+    outside: the sum of the radii of the mobile sides (a ball tip on a plane:
+    its radius; on a sphere: both radii; a fixed ball's known point on a
+    mobile plane: 0; a plane sensor on a cylinder: the cylinder's radius).
     """
     ctype = ContactType.parse(contact)
     if ctype.fixture != feature.element:
@@ -123,9 +148,14 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
     extra = {key: np.asarray(value, dtype=np.float64) for key, value in (fixture or {}).items()}
     if ctype.fixture_fixed and "o" in extra and "u" not in extra and element(feature.kind).surface:
         extra["u"] = feature.normal_at(extra["o"])[0]
+        if feature.kind == "cylinder":
+            extra["m"] = extra["u"]  # the known contact line's side of the axis
     fside = fixture_side(feature, ctype.fixture_fixed, **extra)
     if rho is None:
-        rho = float(np.reshape(geometry.get("r", 0.0), -1)[0]) + float(feature.core()[3])
+        # From a side's known surface point to the other's mobile core, that core's radius; between two
+        # mobile cores, or a line's or a cylinder's axis above a plane, both radii.
+        radii = (float(np.reshape(geometry.get("r", 0.0), -1)[0]), float(feature.core()[3]))
+        rho = sum(r for r, fixed in zip(radii, (ctype.sensor_fixed, ctype.fixture_fixed)) if ctype.is_locus or not fixed)
     centre = placement_centre(ctype.sensor, geometry, None if contact_point is None else np.reshape(contact_point, (1, 3)))
     return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre)
 

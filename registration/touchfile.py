@@ -33,6 +33,7 @@ import numpy as np
 from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .contacts import ContactType
 from .elements import KINDS, element
+from .touches import EXTRA_SENSOR_KEYS
 
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
@@ -195,8 +196,10 @@ def _sensor_contact(entry, points, where):
     if not isinstance(sensor, dict) or sensor.get("kind") not in KINDS:
         raise ValueError(f"{where}: sensor must be an object with a kind ({', '.join(KINDS)}) and its geometry")
     keys = element(sensor["kind"]).json_keys
-    if set(sensor) != {"kind", *keys}:
-        raise ValueError(f"{where}: a {sensor['kind']} sensor has the keys kind, {', '.join(keys)}")
+    optional = tuple(EXTRA_SENSOR_KEYS.get(sensor["kind"], ()))
+    if not {"kind", *keys} <= set(sensor) <= {"kind", *keys, *optional}:
+        raise ValueError(f"{where}: a {sensor['kind']} sensor has the keys kind, {', '.join(keys)}"
+                         + "".join(f" (and optionally {key})" for key in optional))
     for key, value in sensor.items():
         if key != "kind":
             _check_range(_check_finite(value, f"{where}: sensor {key}"), f"{where}: sensor {key}")

@@ -193,6 +193,10 @@ class Template:
     def feature_map(self) -> dict:
         return {feature.id: feature for feature in self.features()}
 
+    def extras(self) -> dict:
+        """Top-level features.json entries of this kind of fixture beyond the common ones."""
+        return {}
+
     def parameters_json(self) -> dict:
         out = {param.name: self.values[param.name.replace("-", "_")] for param in self.PARAMS}
         out["base"] = self.base

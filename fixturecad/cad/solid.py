@@ -23,3 +23,32 @@ def fixture_solid(template) -> cq.Shape:
     fused = body.fuse(base_solid(template.anchor())).clean()
     solids = fused.Solids()
     return solids[0] if len(solids) == 1 else fused
+
+
+def _piece_solid(piece) -> cq.Shape:
+    """One designed feature on its stalk (see :mod:`fixturecad.design.layout`)."""
+    w = cq.Vector(*piece.w)
+    below = piece.below()
+    start = cq.Vector(*(piece.foot - below * piece.w))
+    shape = cq.Solid.makeCylinder(piece.radius, below + piece.length, start, w)
+    top = cq.Vector(*piece.top)
+    if piece.element == "S":
+        shape = shape.fuse(cq.Solid.makeSphere(piece.head_radius, top, angleDegrees1=-90, angleDegrees2=90))
+    elif piece.element == "P":
+        shape = shape.fuse(cq.Solid.makeCone(piece.radius, 0.0, piece.feature().point @ piece.w - piece.top @ piece.w,
+                                             top, w))
+    elif piece.element == "L":
+        for normal in piece.roof_normals():
+            plane = cq.Plane(origin=top, xDir=cq.Vector(*piece.ridge), normal=cq.Vector(*normal))
+            reach = 4 * piece.radius
+            shape = shape.cut(cq.Workplane(plane).rect(reach, reach).extrude(reach).val())
+    return shape
+
+
+def design_body(layout) -> cq.Shape:
+    """A designed fixture: the base block with every feature's piece fused on, one solid."""
+    s, t = layout.size, layout.thickness
+    block = cq.Solid.makeBox(s, s, t, cq.Vector(-s / 2, -s / 2, -t))
+    fused = block.fuse(*[_piece_solid(piece) for piece in layout.pieces]).clean()
+    solids = fused.Solids()
+    return solids[0] if len(solids) == 1 else fused

@@ -23,7 +23,7 @@ from fixturecad.registration.features import Cylinder, Line, Plane, Point, Spher
 from fixturecad.registration.mobility import matrix_rank, null_space
 from fixturecad.registration.motions import core_symmetry, free_motion_names
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.touches import contact_touch
+from fixturecad.registration.touches import contact_touch, laid_sensor
 
 STRUCTURE_SEED = 11
 SIZE_MM = 50.0  # features within this of the origin, touches within this of their feature's anchor
@@ -236,11 +236,6 @@ def _group(feature, touch, index):
     else:
         t1, t2 = perpendicular_basis(n)
         tangent = np.cos(touch.tangent) * t1 + np.sin(touch.tangent) * t2
-    sensor = {"P": {"kind": "point", "point": c},
-              "S": {"kind": "sphere", "center": c + touch.radius * n, "radius": touch.radius},
-              "PL": {"kind": "plane", "point": c, "normal": -n},
-              "L": {"kind": "line", "point": c, "direction": tangent},
-              "C": {"kind": "cylinder", "point": c + touch.radius * n, "axis": tangent, "radius": touch.radius},
-              }[ctype.sensor]
+    sensor = laid_sensor(ctype.sensor, c, n, tangent, touch.radius)
     fixture = {"o": c} if ctype.fixture_fixed else None
     return contact_touch(feature, ctype.name, sensor, index, fixture=fixture, contact_point=c)

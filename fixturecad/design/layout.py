@@ -1,0 +1,386 @@
+"""Where the features of a designed fixture go, and the touch plan they carry (no CAD).
+
+Fixture frame: a square base block, side ``size_mm``, its top face in z = 0
+(origin at its centre, Z up). Every fixture-side element is the head of a
+round stalk that rises from inside the block along a direction ``w`` at
+least ``MIN_ELEVATION_DEG`` above the horizon:
+
+* PL: the stalk's flat end face (normal ``w``);
+* S: a ball on the stalk's end;
+* C: the stalk itself, a boss whose lateral face is the feature (axis ``w``);
+* L: a chisel end, two roof faces meeting in a straight ridge across ``w``;
+* P: a cone tip on the stalk's end (its apex).
+
+The stalks cross z = 0 at their feet and stay apart above it, so the solid is
+the block plus one piece per feature and its volume is exact: a cylinder cut
+obliquely by z = 0 keeps ``pi a^2`` times its axial length above the plane.
+Touch points face upwards (the sensor comes from above, the block cannot be in
+its way) and their approach rays stay clear of the other pieces.
+
+The touch plan holds one touch per contact; its mobility at the real
+geometry is the rank of the contact model's rows
+(:mod:`fixturecad.registration.problem`). Among seeded random layouts the one
+whose plan carries the most information (the smallest singular value of the
+scaled Jacobian) is kept.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fixturecad.registration.contacts import ContactType
+from fixturecad.registration.elements import perpendicular_basis
+from fixturecad.registration.features import Cylinder, Extent, Line, Plane, Point, Sphere
+from fixturecad.registration.mobility import matrix_rank
+from fixturecad.registration.problem import Problem
+from fixturecad.registration.synthetic import plan_touches
+from fixturecad.registration.touches import build_groups, laid_sensor
+
+MIN_ELEVATION_DEG = 45.0  # stalks rise at least this steeply: seen from above, printed without support
+MIN_APPROACH_Z = 0.15  # a touch's outward normal climbs at least this much: the sensor comes from above
+CLEARANCE_MM = 2.0  # gap kept between pieces above the base, and between an approach ray and a piece
+BASE_THICKNESS = 0.25  # of the size
+STALK_RADIUS = {"PL": 0.07, "S": 0.04, "C": 0.05, "L": 0.06, "P": 0.05}  # of the size
+SHARED_PLANE_RADIUS = 0.12  # of the size: a face touched several times gets a wider disc
+BALL_RADIUS = 0.1  # of the size
+HEAD_LENGTH = 0.22  # axial length of a stalk above the base top, of the size
+FOOT_RING = 0.28  # feet on a circle of this radius, of the size
+ROOF_HALF_ANGLE_DEG = 45.0  # a chisel's roof faces leave its ridge this far from the stalk direction
+CONE_HEIGHT = 1.0  # a cone tip's height, of its stalk radius
+MIN_SIZE_MM = 20.0
+LAYOUTS_COMPARED = 16  # locating layouts a design chooses the best of
+LAYOUT_TRIALS = 400  # random layouts tried at most
+MIN_MARGIN = 1e-3  # smallest normalised singular value of the plan's Jacobian a design accepts
+FEATURE_NAMES = {"PL": "face", "S": "ball", "C": "boss", "L": "edge", "P": "tip"}
+
+
+@dataclass
+class Piece:
+    """One feature on its stalk: foot in z = 0, direction ``w``, stalk radius, length above the foot."""
+
+    id: str
+    element: str
+    foot: np.ndarray
+    w: np.ndarray
+    radius: float
+    length: float
+    ridge: np.ndarray | None = None  # a chisel's ridge direction (perpendicular to w)
+    head_radius: float = 0.0  # a ball's radius
+
+    @property
+    def top(self) -> np.ndarray:
+        return self.foot + self.length * self.w
+
+    @property
+    def reach(self) -> float:
+        """Radius of the capsule from the foot to the top that holds the piece."""
+        return max(self.radius, self.head_radius)
+
+    @property
+    def tilt(self) -> float:
+        """Half the vertical extent of the stalk's cross-section, per unit radius."""
+        return math.sqrt(max(0.0, 1.0 - self.w[2] ** 2))
+
+    def below(self) -> float:
+        """Axial length of the stalk below the foot (inside the block), its end disc under z = 0."""
+        return (self.radius * self.tilt + 0.02 * self.length) / self.w[2]
+
+    def feature(self):
+        """The analytic sensing feature with its patch."""
+        top, w = self.top, self.w
+        if self.element == "PL":
+            return Plane(self.id, top, w, Extent(cylinders=[[*top, *w, self.radius]]))
+        if self.element == "S":
+            # the patch ends at the circle where the stalk enters the ball
+            cut = self.foot @ w + self.length - math.sqrt(self.head_radius**2 - self.radius**2)
+            return Sphere(self.id, top, self.head_radius, Extent(halfspaces=[[*(-w), -cut]]))
+        if self.element == "C":
+            return Cylinder(self.id, self.foot, w, self.radius, Extent(interval=(self.boss_start(), self.length)))
+        if self.element == "L":
+            return Line(self.id, self.top, self.ridge, Extent(interval=(-self.radius, self.radius)))
+        return Point(self.id, self.top + CONE_HEIGHT * self.radius * w)
+
+    def boss_start(self) -> float:
+        """Axial parameter from which a boss's lateral face stands clear of the block."""
+        return (self.radius * self.tilt + CLEARANCE_MM) / self.w[2]
+
+    def roof_drop(self) -> float:
+        """How far a chisel's roof falls from its ridge to the stalk's rim, along w."""
+        return self.radius * math.tan(math.radians(ROOF_HALF_ANGLE_DEG))
+
+    def roof_normals(self) -> list:
+        """Outward normals of a chisel's two roof faces, each leaving the ridge."""
+        beta = math.radians(ROOF_HALF_ANGLE_DEG)
+        across = np.cross(self.w, self.ridge)
+        return [math.cos(beta) * self.w + side * math.sin(beta) * across for side in (1.0, -1.0)]
+
+    def volume(self) -> float:
+        """Volume of the piece above z = 0, mm^3 (exact: see the module doc)."""
+        a, L = self.radius, self.length
+        stalk = math.pi * a**2 * L
+        if self.element == "S":
+            r = self.head_radius
+            h0 = math.sqrt(r**2 - a**2)
+            cap = r - h0
+            return 4.0 / 3.0 * math.pi * r**3 + math.pi * a**2 * (L - h0) - math.pi * cap**2 * (3 * r - cap) / 3.0
+        if self.element == "L":
+            return stalk - 4.0 / 3.0 * a**3 * math.tan(math.radians(ROOF_HALF_ANGLE_DEG))
+        if self.element == "P":
+            return stalk + math.pi * a**2 * CONE_HEIGHT * a / 3.0
+        return stalk
+
+    def lowest_above(self) -> float:
+        """The lowest z of the piece's head (a ball's bottom, a roof's rim, the end disc's rim)."""
+        if self.element == "S":
+            return self.top[2] - self.head_radius
+        if self.element == "L":
+            return (self.length - self.roof_drop()) * self.w[2] - self.radius * self.tilt
+        return self.length * self.w[2] - self.radius * self.tilt
+
+    def to_json(self) -> dict:
+        out = {"id": self.id, "element": self.element, "foot": self.foot.tolist(), "direction": self.w.tolist(),
+               "stalk_radius_mm": self.radius, "length_mm": self.length}
+        if self.ridge is not None:
+            out["ridge"] = self.ridge.tolist()
+        if self.head_radius:
+            out["ball_radius_mm"] = self.head_radius
+        return out
+
+
+@dataclass
+class Layout:
+    """A placed design: the block, its pieces and the touch plan."""
+
+    size: float
+    pieces: list
+    touches: list  # touch-plan entries (templates.base.touch form): one per contact
+    checks: list  # a second touch of each contact elsewhere on its feature: what makes the pose unique
+    margin: float = 0.0
+    mobility: int = 6
+
+    @property
+    def thickness(self) -> float:
+        return BASE_THICKNESS * self.size
+
+    def features(self) -> list:
+        return [piece.feature() for piece in self.pieces]
+
+    def volume(self) -> float:
+        return self.size**2 * self.thickness + sum(piece.volume() for piece in self.pieces)
+
+
+def plan_problem(features, entries) -> Problem:
+    """The stacked contact rows of a touch plan made at the nominal pose."""
+    touches, contacts = plan_touches(entries, np.eye(4))
+    return Problem(build_groups({f.id: f for f in features}, touches, contacts=contacts))
+
+
+def plan_jacobian(features, entries) -> np.ndarray:
+    """The twist Jacobian (m, 6) of a touch plan at its nominal pose: the contact model's rows."""
+    return plan_problem(features, entries).sensor_rows(np.eye(3), np.zeros(3))[1]
+
+
+def plan_mobility(features, entries, length_mm) -> tuple[int, float]:
+    """(mobility, margin) of a plan: 6 - rank of its rows, and the smallest singular value of the
+    Jacobian with rotations scaled by ``length_mm`` over the largest (0 when it does not locate)."""
+    J = plan_jacobian(features, entries)
+    rank = matrix_rank(J, length_mm)
+    s = np.linalg.svd(J / np.array([length_mm] * 3 + [1.0] * 3), compute_uv=False)
+    return 6 - rank, float(s[5] / s[0]) if rank == 6 and len(s) >= 6 else 0.0
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def _rotate(v, axis, angle):
+    """``v`` turned by ``angle`` rad about unit ``axis`` (Rodrigues)."""
+    return v * math.cos(angle) + np.cross(axis, v) * math.sin(angle) + axis * (axis @ v) * (1 - math.cos(angle))
+
+
+def _direction(rng, outward=None) -> np.ndarray:
+    """A random stalk direction; leaning away from the centre (azimuth ``outward``, rad) when given."""
+    elevation = math.radians(rng.uniform(MIN_ELEVATION_DEG, 85.0))
+    azimuth = rng.uniform(0.0, 2 * math.pi) if outward is None else outward + rng.uniform(-1.2, 1.2)
+    return np.array([math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
+                     math.sin(elevation)])
+
+
+def _upward(axis) -> np.ndarray:
+    """The unit direction perpendicular to ``axis`` that climbs most."""
+    up = np.array([0.0, 0.0, 1.0])
+    return _unit(up - (up @ axis) * axis)
+
+
+def touch_spot(piece: Piece, index: int, count: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """The ``index``-th of ``count`` touch points on a piece's feature and the outward normal there."""
+    w = piece.w
+    phase = rng.uniform(0, 2 * math.pi)
+    turn = phase + 2 * math.pi * index / count
+    if piece.element == "PL":
+        e1, e2 = perpendicular_basis(w)
+        spread = 0.65 * piece.radius if count > 1 else 0.3 * piece.radius
+        return piece.top + spread * (math.cos(turn) * e1 + math.sin(turn) * e2), w
+    if piece.element == "S":
+        # within 55 deg of the stalk's end direction, never on its underside
+        e1, e2 = perpendicular_basis(w)
+        tilt = math.radians(rng.uniform(15.0, 55.0)) if count > 1 else math.radians(rng.uniform(0.0, 45.0))
+        normal = math.cos(tilt) * w + math.sin(tilt) * (math.cos(turn) * e1 + math.sin(turn) * e2)
+        return piece.top + piece.head_radius * normal, normal
+    if piece.element == "C":
+        up = _upward(w)
+        normal = _rotate(up, w, math.radians(rng.uniform(-50.0, 50.0)))
+        lo = piece.boss_start() + 0.1 * (piece.length - piece.boss_start())
+        t = lo + (0.25 + 0.6 * (index + rng.uniform(0, 1)) / count) * (piece.length - lo)
+        return piece.foot + min(t, piece.length - 0.05 * piece.length) * w + piece.radius * normal, normal
+    if piece.element == "L":
+        s = (-0.6 + 1.2 * (index + 0.5) / count + rng.uniform(-0.1, 0.1)) * piece.radius
+        return piece.top + s * piece.ridge, w
+    return piece.feature().point, w
+
+
+def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, rng) -> dict:
+    """One touch-plan entry: a sensor element of ``ctype`` touching ``feature`` at ``point`` from the
+    outward ``normal``'s side (:func:`~fixturecad.registration.touches.laid_sensor`); a line or a
+    cylinder sensor lies across an edge, round a boss, or anywhere in a face or on a ball."""
+    entry = {"contact": ctype.name, "feature": feature.id, "points": [[float(v) for v in point]]}
+    if ctype.sensor == "P" and not ctype.fixture_fixed:
+        return entry  # a plain probe touch
+    axis = feature.axis if feature.kind == "cylinder" else feature.direction if feature.kind == "line" else None
+    if axis is None:
+        tangent = _rotate(perpendicular_basis(normal)[0], normal, rng.uniform(0, 2 * math.pi))
+    else:
+        tangent = _unit(np.cross(axis, normal))  # across the edge, or round the boss
+        if feature.kind == "cylinder":
+            tangent = _rotate(tangent, normal, math.radians(rng.uniform(-35.0, 35.0)))
+    sensor = laid_sensor(ctype.sensor, point, normal, tangent, ball_mm)
+    if ctype.sensor == "PL" and ctype.sensor_fixed and axis is not None:
+        sensor["line"] = axis  # where on the plane the line or the boss lies is known
+    entry["sensor"] = {key: value if isinstance(value, (str, float)) else [float(v) for v in value]
+                       for key, value in sensor.items()}
+    return entry
+
+
+def _segment_distance(a0, a1, b0, b1, samples=24) -> float:
+    """Smallest distance between two segments (sampled finely enough for a clearance test), mm."""
+    t = np.linspace(0.0, 1.0, samples)[:, None]
+    a = a0 + t * (a1 - a0)
+    b = b0 + t * (b1 - b0)
+    return float(np.min(np.linalg.norm(a[:, None] - b[None], axis=2)))
+
+
+def _capsules(piece: Piece) -> list:
+    """Segments with radii (start, end, radius mm) that hold the piece: its stalk, and a ball apart."""
+    tip = CONE_HEIGHT * piece.radius if piece.element == "P" else 0.0
+    stalk = (piece.foot, piece.top + tip * piece.w, piece.radius)
+    return [stalk, (piece.top, piece.top, piece.head_radius)] if piece.element == "S" else [stalk]
+
+
+def _place(groups, size, rng) -> list:
+    """Random pieces for the feature groups ``[(id, element, touch count)]``; None if they collide."""
+    count = len(groups)
+    ring = FOOT_RING * size if count > 1 else 0.0
+    phase = rng.uniform(0, 2 * math.pi)
+    pieces = []
+    for index, (fid, element, touches) in enumerate(groups):
+        angle = phase + 2 * math.pi * index / count + rng.uniform(-0.2, 0.2)
+        foot = np.array([ring * math.cos(angle), ring * math.sin(angle), 0.0])
+        w = _direction(rng, angle if count > 1 else None)
+        radius = (SHARED_PLANE_RADIUS if element == "PL" and touches > 1 else STALK_RADIUS[element]) * size
+        head = BALL_RADIUS * size if element == "S" else 0.0
+        length = HEAD_LENGTH * size * rng.uniform(0.8, 1.2)
+        if element == "S":
+            length = max(length, (head + CLEARANCE_MM) / w[2] + 0.01 * size)
+        ridge = _unit(_rotate(perpendicular_basis(w)[0], w, rng.uniform(0, 2 * math.pi))) if element == "L" else None
+        piece = Piece(fid, element, foot, w, radius, length, ridge, head)
+        if element == "L":
+            piece.length = max(length, (piece.roof_drop() * w[2] + radius * piece.tilt + CLEARANCE_MM) / w[2])
+        pieces.append(piece)
+    return pieces if _fits(pieces, size) else None
+
+
+def rim_points(size) -> np.ndarray:
+    """Three points on the block's top face near its corners (the point-probe plan's primary touches), mm."""
+    corner = 0.45 * size - CLEARANCE_MM
+    return np.array([[-corner, -corner, 0.0], [corner, -corner, 0.0], [-corner, corner, 0.0]])
+
+
+def _fits(pieces, size) -> bool:
+    """Every piece inside the block's footprint, clear of the others and of the rim touches seen from
+    above, its head above the block."""
+    if not all(_reachable(point, np.array([0.0, 0.0, 1.0]), None, pieces, size) for point in rim_points(size)):
+        return False
+    thickness = BASE_THICKNESS * size
+    for piece in pieces:
+        w_xy = math.hypot(piece.w[0], piece.w[1])
+        below = piece.below()
+        if np.abs(piece.foot[:2]).max() + piece.reach + below * w_xy > size / 2 - CLEARANCE_MM:
+            return False
+        if below * piece.w[2] + piece.radius * piece.tilt > thickness - CLEARANCE_MM:
+            return False
+        if piece.lowest_above() < CLEARANCE_MM:
+            return False
+    for i, first in enumerate(pieces):
+        for second in pieces[i + 1:]:
+            for a0, a1, ra in _capsules(first):
+                for b0, b1, rb in _capsules(second):
+                    if _segment_distance(a0, a1, b0, b1) < ra + rb + CLEARANCE_MM:
+                        return False
+    return True
+
+
+def _reachable(point, normal, owner, pieces, size) -> bool:
+    """The approach ray along the outward normal climbs and clears every other piece."""
+    if normal[2] < MIN_APPROACH_Z:
+        return False
+    end = point + 3.0 * size * normal
+    return all(_segment_distance(point, end, a0, a1) > r + CLEARANCE_MM
+               for piece in pieces if piece.id != owner for a0, a1, r in _capsules(piece))
+
+
+def layout_plan(contacts, labels, size, ball_mm, rng):
+    """One random layout and its touch plan, or None when the pieces collide or a touch is hidden.
+
+    ``contacts``: ContactTypes, sensor first; ``labels``: the feature id of each.
+    """
+    order = list(dict.fromkeys(labels))
+    groups = [(fid, contacts[labels.index(fid)].fixture, labels.count(fid)) for fid in order]
+    pieces = _place(groups, size, rng)
+    if pieces is None:
+        return None
+    by_id = {piece.id: piece for piece in pieces}
+    features = {piece.id: piece.feature() for piece in pieces}
+    seen = {fid: 0 for fid in order}
+    entries, checks = [], []
+    for ctype, fid in zip(contacts, labels):
+        count = labels.count(fid)
+        for index, plan in ((seen[fid], entries), (seen[fid] + count, checks)):
+            point, normal = touch_spot(by_id[fid], index, 2 * count, rng)
+            if not _reachable(point, normal, fid, pieces, size):
+                return None
+            plan.append(sensor_entry(ctype, features[fid], point, normal, ball_mm, rng))
+        seen[fid] += 1
+    return Layout(size, pieces, entries, checks)
+
+
+def best_layout(contacts, labels, size, ball_mm, seed, keep=LAYOUTS_COMPARED, trials=LAYOUT_TRIALS):
+    """The layout of highest margin among the first ``keep`` locating ones of up to ``trials`` seeded
+    random layouts, or None; and the smallest mobility met (what remains when none locates)."""
+    rng = np.random.default_rng(seed)
+    best, lowest, found = None, 6, 0
+    for _ in range(trials):
+        layout = layout_plan(contacts, labels, size, ball_mm, rng)
+        if layout is None:
+            continue
+        layout.mobility, layout.margin = plan_mobility(layout.features(), layout.touches, size)
+        lowest = min(lowest, layout.mobility)
+        if layout.mobility or layout.margin < MIN_MARGIN:
+            continue
+        found += 1
+        if best is None or layout.margin > best.margin:
+            best = layout
+        if found == keep:
+            break
+    return best, lowest

@@ -1,0 +1,119 @@
+"""fixturecad design: every class of Table V laid out to locate at its real geometry, built samples, bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from cli import assert_bad_input, run
+from fixturecad.design.combination import for_class, parse
+from fixturecad.design.layout import best_layout, plan_problem
+from fixturecad.registration.mobility import matrix_rank
+from fixturecad.theory.catalogue import lookup
+from fixturecad.theory.enumeration import enumerate_classes
+
+SIZE_MM, BALL_MM = 100.0, 3.0
+
+
+def test_every_class_of_table_five_gets_a_layout_that_locates_minimally():
+    """All 579 classes: the plan's rows have rank 6 at the concrete geometry, each contact gives the rows
+    of its dimension in Table III, and, as Table V says of its classes, no contact can be left out."""
+    found = enumerate_classes().found
+    assert len(found) == 579
+    for item in found:
+        combination = for_class(item.members)
+        assert tuple(combination.members) == item.members
+        layout, _ = best_layout(combination.contacts, combination.labels, SIZE_MM, BALL_MM, seed=1, keep=1)
+        assert layout is not None and layout.mobility == 0, item.name
+        problem = plan_problem(layout.features(), layout.touches)
+        J = problem.sensor_rows(np.eye(3), np.zeros(3))[1]
+        rows = problem.row_feature
+        for ctype, label in zip(combination.contacts, combination.labels):
+            assert np.sum(rows == label) == 6 - lookup(ctype.name).dim, (item.name, ctype.name)
+            assert matrix_rank(J[rows != label], SIZE_MM) < 6, (item.name, f"{ctype.name} is redundant")
+
+
+def test_labels_share_a_feature_as_on_a_cube():
+    """3-2-1 on three faces locates; 4-1-1 leaves one rotation, six touches on one face the planar motion."""
+    layout, _ = best_layout(*_parsed("a a a b b c"), SIZE_MM, BALL_MM, seed=1)
+    assert layout.mobility == 0 and len(layout.pieces) == 3
+    assert best_layout(*_parsed("a a a a b c"), SIZE_MM, BALL_MM, seed=1, trials=30)[1] == 1
+    assert best_layout(*_parsed("a a a a a a"), SIZE_MM, BALL_MM, seed=1, trials=30)[1] == 3
+
+
+def _parsed(labels):
+    combination = parse([f"P/F-PL/M@{label}" for label in labels.split()])
+    return combination.contacts, combination.labels
+
+
+@pytest.mark.parametrize("contact_class", ["{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}", "{S}{S-R}{G3-R}",
+                                           "{R}{R}"])
+def test_a_designed_fixture_builds_and_registers(contact_class, tmp_path):
+    """One valid solid whose BREP carries every feature (checked by the build), features.json naming the
+    class, and the folder's register.py recovers a pose from the plan's touches made at that pose."""
+    result = run("design", "--class", contact_class, "--out", tmp_path / "fixture", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    folder = tmp_path / "fixture"
+    document = json.loads((folder / "features.json").read_text())
+    assert document["template"] == "design" and document["design"]["mobility"] == 0
+    assert document["contact_class"] == contact_class == document["design"]["contact_class"]
+    assert set(document["design"]["combination"]) <= set(result.stdout.split())
+
+    from fixturecad.registration.pose import random_rotation
+    from fixturecad.registration.synthetic import plan_touches
+    from fixturecad.registration.touchfile import touch_json
+
+    rng = np.random.default_rng(5)
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = random_rotation(rng), rng.uniform(-200, 200, 3)
+    (tmp_path / "touches.json").write_text(touch_json(*plan_touches(document["plans"]["default"]["touch_plan"], pose)))
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, folder / "register.py", tmp_path / "touches.json", "--json"],
+                         capture_output=True, text=True)
+    solutions = [np.array(s["pose"]) for s in json.loads(out.stdout)["solutions"]]
+    assert min(np.abs(s - pose).max() for s in solutions) < 1e-3
+
+
+@pytest.mark.parametrize("args, words", [
+    (["P/F-XL/M"], ["cannot read contact"]),
+    (["P/F-PL/M@a", "P/F-S/M@a"], ["label 'a'", "one fixture element"]),
+    (["P/F-PL/M@a"] * 6, ["does not locate", "3 freedoms", "planar motion {G_P} in the plane of a"]),
+    (["--class", "{S-S}x3 {S-T2}x3", "--size", "5"], ["--size"]),
+    (["--class", "{S-S}"], ["not a class of Table V"]),
+    (["C/M-PL/F"], ["contact line", "PL/F-C/M"]),
+    ([], ["give either contacts"]),
+])
+def test_bad_input_is_one_line_and_writes_nothing(args, words, tmp_path):
+    assert_bad_input(run("design", *args, cwd=tmp_path), *words)
+    assert not (tmp_path / "out").exists()
+
+
+def test_every_contact_a_plan_can_make_holds_at_the_pose_it_was_made_at():
+    """Both orientations of the 41 contacts (those a plan can make): the touch, made by its sensor at a
+    random pose, has zero rows at that pose and the rank of its dimension in Table III."""
+    from fixturecad.design.combination import plan_gap
+    from fixturecad.design.layout import layout_plan
+    from fixturecad.registration.pose import random_rotation
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.synthetic import plan_touches
+    from fixturecad.registration.touches import build_groups
+    from fixturecad.theory.catalogue import catalogue
+
+    rng = np.random.default_rng(3)
+    for entry in catalogue():
+        for ctype in {entry.ctype, entry.ctype.swapped()}:
+            if plan_gap(ctype):
+                continue
+            layout = None
+            while layout is None:
+                layout = layout_plan([ctype], ["f"], SIZE_MM, BALL_MM, rng)
+            R, t = random_rotation(rng), rng.uniform(-300, 300, 3)
+            pose = np.eye(4)
+            pose[:3, :3], pose[:3, 3] = R, t
+            touches, contacts = plan_touches(layout.touches, pose)
+            problem = Problem(build_groups({f.id: f for f in layout.features()}, touches, contacts=contacts))
+            values, J = problem.sensor_rows(R, t)
+            assert np.abs(values).max() < 1e-9, ctype.name
+            assert matrix_rank(J, SIZE_MM) == 6 - entry.dim, ctype.name
