@@ -17,6 +17,7 @@ from fixturecad.calibration_commands import app as calibration_app
 from fixturecad.design_commands import app as design_app
 from fixturecad.errors import InputError
 from fixturecad.fixture_commands import app as fixture_app
+from fixturecad.plan_commands import app as plan_app
 from fixturecad.registration_commands import app as registration_app
 from fixturecad.theory.commands import app as theory_app
 
@@ -27,7 +28,7 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-for group in (theory_app, fixture_app, design_app, registration_app, calibration_app):
+for group in (theory_app, fixture_app, design_app, plan_app, registration_app, calibration_app):
     app.add_typer(group)
 
 

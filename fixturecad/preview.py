@@ -90,6 +90,37 @@ def fixture_scene(template, features, matches: dict, parts) -> dict:
     return scene(title, faces, feature_rows, touches, views, sensors)
 
 
+def plan_scene(title, vertices, triangles, features, entries, plan_name, views=VIEWS) -> dict:
+    """Preview data of a touch plan on the fixture's mesh (vertices (n, 3), triangles (m, 3), mm): triangles
+    on a sensing feature's patch take its colour, the plan's touches (entries with their ``approaches``)
+    are numbered in the plan's order."""
+    centroids = vertices[triangles].mean(axis=1)
+    owner = np.full(len(triangles), None, dtype=object)
+    for feature in features:
+        if feature.kind in ("plane", "sphere", "cylinder"):
+            on = (np.abs(feature.signed_distance(centroids)) < 0.01 * _span([(None, vertices, None)])) & \
+                feature.contains(centroids, 1e-3)
+            owner[on & (owner == None)] = feature.id  # noqa: E711 (elementwise)
+    faces = [(vertices, triangles[owner == fid], fid) for fid in [None] + [f.id for f in features]
+             if np.any(owner == fid)]
+    touches, number = [], 0
+    for entry in entries:
+        for point, approach in zip(entry["points"], entry["approaches"]):
+            number += 1
+            touches.append({"point": np.array(point), "normal": -np.array(approach), "label": str(number),
+                            "feature": entry["feature"],
+                            "text": f"{number:>2} {entry['contact']:<10} {entry['feature']}"})
+    rows = []
+    for feature in features:
+        if feature.kind in ("plane", "sphere", "cylinder") and np.any(owner == feature.id):
+            nodes = centroids[owner == feature.id]
+            anchor = _label_place(nodes, [t["point"] for t in touches], 0.15 * _span([(None, vertices, None)]))
+            anchor = nodes.mean(axis=0) if anchor is None else anchor
+            rows.append({"id": feature.id, "kind": feature.kind, "element": feature.element, "anchor": anchor,
+                         "normal": feature.normal_at(anchor[None])[0], "segment": None})
+    return {**scene(title, faces, rows, touches, views), "plan": plan_name}
+
+
 def _label_place(nodes, touch_points, clearance):
     """Where a feature's label goes: the node nearest the feature's centre among those at least
     ``clearance`` mm from every touch; None when none is."""
@@ -211,13 +242,13 @@ def render(data: dict, path) -> None:
         ax.set_zlabel("Z mm")
         ax.view_init(elev=elev, azim=azim)
     handles = [Patch(color=colours[f["id"]], label=f"{f['id']}: {f['kind']} ({f['element']})") for f in data["features"]]
-    handles.append(Line2D([], [], marker="o", linestyle="", color=TOUCH_COLOUR, label="touch of the default plan"))
+    handles.append(Line2D([], [], marker="o", linestyle="", color=TOUCH_COLOUR, label=f"touch of the {data.get('plan', 'default')} plan"))
     handles.append(Line2D([], [], marker="s", color="#d00000", markerfacecolor="black", markeredgecolor="black",
                           label="fixture frame: origin, X Y Z"))
     if data.get("sensors"):
         handles.append(Line2D([], [], linestyle="--", color=SENSOR_COLOUR, label="plane / line sensor"))
     if data["touches"]:
-        listing = "default touch plan\n" + "\n".join(t["text"] for t in data["touches"])
+        listing = f"{data.get('plan', 'default')} touch plan\n" + "\n".join(t["text"] for t in data["touches"])
         figure.text(0.5, 0.88, listing, ha="center", va="top", multialignment="left", fontsize=8, family="monospace",
                     bbox={"facecolor": "white", "edgecolor": "#888888", "alpha": 0.85})
     figure.legend(handles=handles, loc="lower center", ncol=(len(handles) + 1) // 2, fontsize=9, frameon=False)

@@ -102,6 +102,7 @@ def staged_file(path: Path):
     path = Path(path)
     handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
     os.close(handle)
+    os.chmod(name, 0o666 & ~_umask())  # mkstemp makes it private; the result is an ordinary file
     try:
         yield Path(name)
         os.replace(name, path)

@@ -192,3 +192,15 @@ def test_empty_touch_lists_are_no_touches(built):
     result = register_touches(features, touches)
     assert result["status"] == "underdetermined" and result["touches"] == 5
     assert result["free_motions"] == ["translation {T_u} along the normal of left"]
+
+
+def test_replaced_files_are_ordinary_files(built, tmp_path):
+    """simulate's files are written whole (a temporary file moved in) with the umask's mode, not private."""
+    import stat
+
+    out = run("simulate", built("cube"), "--trials", 2, "--out", tmp_path / "sim")
+    assert out.returncode == 0, out.stderr
+    mask = os.umask(0)
+    os.umask(mask)
+    for name in ("simulation.json", "simulation.png"):
+        assert stat.S_IMODE((tmp_path / "sim" / name).stat().st_mode) == 0o666 & ~mask

@@ -1,0 +1,147 @@
+"""CLI: ``fixturecad plan``: a point-probe touch plan designed on the Fisher information."""
+
+from enum import Enum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from fixturecad.errors import InputError
+from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+
+app = typer.Typer()
+
+PLANS_DIR = "plans"
+MIN_TOUCHES = 6  # point-probe touches give one row each; a pose needs six
+MAX_TOUCHES = 60
+
+
+class Criterion(str, Enum):
+    d = "d"
+    a = "a"
+    e = "e"
+
+
+@app.command()
+def plan(
+    out_dir: Annotated[Path, typer.Argument(help="Fixture folder written by fixturecad build or design.")],
+    touches: Annotated[int, typer.Option(help=f"Number of point-probe touches ({MIN_TOUCHES} to {MAX_TOUCHES}).")],
+    criterion: Annotated[Criterion, typer.Option(help="d: det of the information; a: trace of the covariance; "
+                                                      "e: the worst direction (docs/plans.md).")] = Criterion.d,
+    features: Annotated[str | None, typer.Option(help="Feature ids to touch, e.g. top,front (default: every "
+                                                      "plane, sphere and cylinder).")] = None,
+    margin: Annotated[float, typer.Option(help="Distance kept from every patch edge, mm.")] = 1.0,
+    name: Annotated[str, typer.Option(help="Plan name: written to OUT_DIR/plans/NAME.json and NAME.csv.")] = "designed",
+    force: Annotated[bool, typer.Option(help="Replace a plan of that name written earlier.")] = False,
+    preview: Annotated[bool, typer.Option(help="Also draw the plan on the fixture: OUT_DIR/plans/NAME.png.")] = False,
+):
+    """Design a touch plan: where a point probe should touch to locate the fixture best."""
+    import json
+    import re
+
+    import numpy as np
+
+    from fixturecad import features_json
+    from fixturecad.registration import planning
+    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.sampling import load_mesh
+    from fixturecad.registration.touchfile import touch_csv
+    from fixturecad.staging import check_files, staged_file
+    from fixturecad.theory.catalogue import lookup
+
+    if not MIN_TOUCHES <= touches <= MAX_TOUCHES:
+        raise InputError(f"--touches must be {MIN_TOUCHES} to {MAX_TOUCHES}: a pose needs six point touches")
+    if not (margin >= 0 and np.isfinite(margin)):
+        raise InputError(f"--margin must be a non-negative number of mm, got {margin}")
+    if not re.fullmatch(r"[a-z0-9][a-z0-9_-]*", name):
+        raise InputError(f"--name must be lower-case letters, digits, - and _, got {name!r}")
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise InputError(f"fixture folder {out_dir} does not exist")
+    document = features_json.read(out_dir)
+    all_features = features_from_json(document)
+    surfaces = [fid for fid, f in all_features.items() if f.kind in ("plane", "sphere", "cylinder")]
+    ids = surfaces if features is None else [fid.strip() for fid in features.split(",") if fid.strip()]
+    unknown = [fid for fid in ids if fid not in all_features]
+    if unknown or not ids:
+        raise InputError(f"unknown feature {unknown[0] if unknown else features!r}; features are {', '.join(all_features)}")
+    try:
+        mesh = load_mesh(out_dir / "fixture.stl", document["volume_mm3"])
+        candidates = planning.candidates(all_features, ids, margin,
+                                         keep=lambda p, n: planning.reachable(mesh.triangles, p, n))
+        chosen = planning.design(candidates, touches, criterion.value)
+    except ValueError as error:
+        raise InputError(str(error)) from None
+    outputs = (f"{name}.json", f"{name}.csv") + ((f"{name}.png",) if preview else ())
+    folder = check_files(out_dir / PLANS_DIR, outputs, force)
+    entries = _entries(candidates, chosen, all_features)
+    robust = planning.robust(candidates.rows[chosen], candidates.length_mm)
+    note = (f"designed by fixturecad plan: {touches} point-probe touches, criterion {criterion.value}, margin "
+            f"{margin:g} mm; {'robust to' if robust else 'NOT robust to'} the loss of any one touch")
+    record = {"contact_class": "".join("{" + lookup(e["contact"]).contact_class + "}" for e in entries
+                                       for _ in e["points"]),
+              "note": note, "touch_plan": entries}
+    with staged_file(folder / f"{name}.json") as path:
+        path.write_text(json.dumps(record, indent=2) + "\n")
+    with staged_file(folder / f"{name}.csv") as path:
+        path.write_text(touch_csv(entries, name))
+    if preview:
+        from fixturecad.preview import plan_scene, render
+
+        title = f"{document['template']}: plan {name!r}, {touches} touches, criterion {criterion.value}"
+        data = plan_scene(title, np.asarray(mesh.vertices), np.asarray(mesh.faces), list(all_features.values()),
+                          entries, name)
+        with staged_file(folder / f"{name}.png") as path:
+            render(data, path)
+    typer.echo(_report(document, all_features, candidates, chosen, entries, robust, touches))
+    typer.echo(f"plan: {folder / f'{name}.json'}\ntouch file to fill in: {folder / f'{name}.csv'}")
+
+
+def _entries(candidates, chosen, features) -> list:
+    """Touch-plan entries (features.json's form) with the approach of every touch: against the outward normal."""
+    entries = {}
+    for k in chosen:
+        fid = candidates.features[k]
+        entry = entries.setdefault(fid, {"contact": f"P/F-{features[fid].element}/M", "feature": fid,
+                                         "points": [], "approaches": []})
+        entry["points"].append(candidates.points[k].tolist())
+        entry["approaches"].append((-candidates.normals[k]).tolist())
+    return list(entries.values())
+
+
+def _bound(problem_rows, sigma_mm=DEFAULT_SIGMA_MM):
+    """(translation um, rotation mdeg) of the bound per um of noise, from rows (m, 6) at the nominal pose."""
+    import numpy as np
+
+    from fixturecad.registration.uncertainty import covariance, sigmas
+
+    t, r = sigmas(covariance(problem_rows, np.zeros(3), sigma_mm))
+    # mm per mm of noise is um per um; deg per mm is mdeg per um
+    return (None, None) if t is None else (t / sigma_mm, r / sigma_mm)
+
+
+def _report(document, features, candidates, chosen, entries, robust, count) -> str:
+    import numpy as np
+
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.synthetic import plan_touches
+    from fixturecad.registration.touches import build_groups
+
+    lines = [f"{'#':>2} {'feature':12s} {'point mm':>28s} {'approach':>24s}"]
+    listed = [(e["feature"], p, a) for e in entries for p, a in zip(e["points"], e["approaches"])]
+    for number, (fid, p, n) in enumerate(listed, start=1):
+        lines.append(f"{number:2d} {fid:12s} ({p[0]:7.2f}, {p[1]:7.2f}, {p[2]:7.2f}) ({n[0]:6.3f}, {n[1]:6.3f}, {n[2]:6.3f})")
+    planned = _bound(candidates.rows[chosen])
+    default = document["plans"]["default"]["touch_plan"]
+    touches, contacts = plan_touches(default, np.eye(4))
+    _, J = Problem(build_groups(features, touches, 0.0, contacts), DEFAULT_SIGMA_MM, SENSOR_LEVER_MM).evaluate(
+        np.eye(3), np.zeros(3))
+    standard = _bound(J)
+    made = sum(len(e["points"]) for e in default)
+    lines.append("bound per um of touch noise: translation um, rotation mdeg")
+    lines.append(f"  planned ({count} touches): {planned[0]:.3f} um, {planned[1]:.3f} mdeg")
+    if standard[0] is not None:
+        lines.append(f"  default plan ({made} touches): {standard[0]:.3f} um, {standard[1]:.3f} mdeg")
+    lines.append("robust to the loss of any one touch" if robust else
+                 "not robust: losing one of these touches leaves the pose undetermined (more touches help)")
+    return "\n".join(lines)
