@@ -61,18 +61,21 @@ def register(
     lever: Annotated[float, typer.Option(help="Sensor size, mm: plane and line sensors tilt by sigma/lever rad.")] = SENSOR_LEVER_MM,
     ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres; default: as the touch file says, a CSV 0).")] = None,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
+    target_sigma: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS translation standard deviation, mm.")] = None,
+    target_sigma_deg: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS rotation standard deviation, deg.")] = None,
 ):
     """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py.
 
     Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 2 bad input.
     """
-    from fixturecad.registration.touchfile import EXIT_CODES, register_file, report
+    from fixturecad.registration.touchfile import EXIT_CODES, register_file, report, target
 
     if not Path(out_dir).is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
     routine = load_routine(out_dir)
     try:
-        result = register_file(routine.FEATURES, routine.register, touches, sigma, lever, ball_radius, fixture_tolerance)
+        result = register_file(routine.FEATURES, routine.register, touches, sigma, lever, ball_radius, fixture_tolerance,
+                               target(target_sigma, target_sigma_deg))
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     typer.echo(report(result, pose_format.value, as_json))

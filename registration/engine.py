@@ -30,14 +30,16 @@ from .ambiguity import features_beyond_tolerance, robust_flag, separating_touch
 from .motions import free_motions
 from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 from .problem import Problem
+from .planning import next_touches
 from .redundancy import redundancy
 from .solve import solve
 from .touches import build_groups
-from .uncertainty import covariance, sigmas
+from .uncertainty import covariance, covariance_from_information, sigmas
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
-                     contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM, tolerance=None):
+                     contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM, tolerance=None, plan_next=False,
+                     target_sigma=None):
     """Register a fixture from labelled touches; return the result dict (see module doc).
 
     Parameters
@@ -52,6 +54,12 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         a pose at which a probe would have touched a surface from inside is rejected
     lever_mm : float, sensor size: plane, line and fixed-surface sensors tilt by
         sigma_mm / lever_mm rad about their contact points (see the module doc)
+    plan_next : bool, also give ``next_touch``: the touch that separates ambiguous candidates, or else the
+        point-probe touch that most raises the determinant of the information (one that removes a free
+        motion when the pose is underdetermined), :mod:`.planning`
+    target_sigma : (mm, deg) or None, also say in ``target`` whether the pose's standard deviations
+        (RMS translation, rotation) meet these and, if not, how many more planned touches are predicted to
+        (``more_touches``, None beyond ``MAX_MORE_TOUCHES``)
 
     Returns
     -------
@@ -120,4 +128,35 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "redundancy": redundancy(problem, best),
         }
     )
+    if plan_next:
+        result["next_touch"] = result["separating_touch"] or _next_touch(features, best)
+    if target_sigma is not None:
+        result["target"] = _target(features, best, problem.sigma, target_sigma, (s_t, s_r))
     return result
+
+
+MAX_MORE_TOUCHES = 30  # planned touches tried before a target is called out of reach
+
+
+def _next_touch(features, solution):
+    (_, fid, point, normal), = next_touches(features, solution)[0]
+    R, t = solution.rotation, solution.translation
+    return {"feature": fid, "point_fixture_mm": point.tolist(), "point_meas_mm": (R @ point + t).tolist(),
+            "approach_meas": (-(R @ normal)).tolist()}
+
+
+def _target(features, solution, sigma_mm, target, now):
+    """Whether (sigma translation mm, rotation deg) meets ``target`` (None: no limit) and how many planned
+    touches would."""
+    def meets(s_t, s_r):
+        return s_t is not None and all(limit is None or value <= limit for value, limit in zip((s_t, s_r), target))
+
+    met = meets(*now)
+    more = 0 if met else None
+    if not met:
+        _, information = next_touches(features, solution, MAX_MORE_TOUCHES)
+        for k, F in enumerate(information, start=1):
+            if meets(*sigmas(covariance_from_information(F, solution.translation, sigma_mm))):
+                more = k
+                break
+    return {"sigma_translation_mm": target[0], "sigma_rotation_deg": target[1], "met": met, "more_touches": more}

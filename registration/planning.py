@@ -15,7 +15,8 @@ Criteria, on the information with rotations scaled by the touch spread
 * ``a``: the trace of the covariance (the mean squared error);
 * ``e``: the smallest eigenvalue (the worst direction).
 
-This module imports numpy only and nothing of fixturecad.
+This module imports numpy only and nothing of fixturecad: it is inlined into
+the generated standalone ``register.py`` (the next touch of a registration).
 """
 
 from dataclasses import dataclass
@@ -158,3 +159,38 @@ def reachable(triangles, points, normals, chunk=64) -> np.ndarray:
         hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
         out[start:start + chunk] = np.bincount(ray[hit], minlength=len(o)) == 0
     return out
+
+
+def _at_pose(features, cands, rotation, translation):
+    """The candidates' rows at a solved pose, in the solution's twist coordinates."""
+    touches = {}
+    for fid, point in zip(cands.features, cands.points):
+        touches.setdefault(fid, []).append(rotation @ point + translation)
+    problem = Problem(build_groups(features, {k: np.array(v) for k, v in touches.items()}))
+    _, J = problem.evaluate(rotation, translation)
+    return J[np.argsort(problem.row_touch, kind="stable")]
+
+
+def next_touches(features, solution, count=1, margin_mm=1.0):
+    """The ``count`` point-probe touches, chosen one after another, that most raise the determinant of the
+    information the solution's touches already give (a free motion removed first when there is one).
+
+    Returns [(candidate index, feature id, point fixture frame (3,), outward normal fixture frame (3,))] and
+    the information after each, (count, 6, 6), scaled rotations per the candidates' spread.
+    """
+    ids = [fid for fid, f in features.items() if f.kind in ("plane", "sphere", "cylinder")]
+    cands = candidates(features, ids, margin_mm)
+    rows = _at_pose(features, cands, solution.rotation, solution.translation)
+    scale = np.r_[np.full(3, 1.0 / cands.length_mm), np.ones(3)]
+    outer = np.einsum("ni,nj->nij", rows * scale, rows * scale)
+    information = (solution.jacobian * scale).T @ (solution.jacobian * scale)
+    ridge = RIDGE * np.trace(outer.sum(0)) / 6 * np.eye(6)
+    chosen, after = [], []
+    for _ in range(count):
+        values = criterion_values(information + ridge + outer, "d")
+        values[chosen] = -np.inf
+        best = int(np.argmax(values))
+        chosen.append(best)
+        information = information + outer[best]
+        after.append(information / np.outer(scale, scale))
+    return [(k, cands.features[k], cands.points[k], cands.normals[k]) for k in chosen], np.array(after)

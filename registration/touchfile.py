@@ -293,11 +293,12 @@ def check_enough(features, touches, contacts, ball_radius_mm):
 
 
 def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM,
-                  ball_radius_mm=None, fixture_tolerance_mm=None):
+                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None):
     """Check the options, read a touch file and register it; the result names every touch's row
     (``rows``, in the engine's touch order) and each flagged touch's.
 
-    ``ball_radius_mm`` None: as the file says (a CSV: 0). Errors are one-line ``ValueError``.
+    ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None. The result
+    has ``next_touch`` (see ``register_touches``). Errors are one-line ``ValueError``.
     """
     if not 0 < sigma_mm < np.inf:
         raise ValueError(f"--sigma must be a positive number of mm, got {sigma_mm}")
@@ -307,11 +308,14 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
         raise ValueError(f"--fixture-tolerance must be a non-negative number of mm, got {fixture_tolerance_mm}")
     if ball_radius_mm is not None:
         ball_radius(ball_radius_mm, "--ball-radius")
+    if target_sigma is not None and not all(x is None or 0 < x < np.inf for x in target_sigma):
+        raise ValueError(f"--target-sigma and --target-sigma-deg must be positive numbers, got {target_sigma}")
     touches, contacts, radius, approaches, rows = read_touch_file(path, features)
     radius = radius if ball_radius_mm is None else ball_radius_mm
     check_enough(features, touches, contacts, radius)
     result = register(touches, sigma_mm=sigma_mm, ball_radius_mm=radius, contacts=contacts,
-                      approaches=approaches, lever_mm=lever_mm, fixture_tolerance_mm=fixture_tolerance_mm)
+                      approaches=approaches, lever_mm=lever_mm, fixture_tolerance_mm=fixture_tolerance_mm,
+                      plan_next=True, target_sigma=target_sigma)
     result["touch_rows"] = rows
     for flag in result["flagged"]:
         flag["row"] = rows[flag["touch"]]
@@ -346,6 +350,18 @@ def format_result(result, pose_format="matrix"):
     if result["separating_touch"]:
         s = result["separating_touch"]
         lines.append(f"separating touch: {s['feature']} at {s['point_meas_mm']} (separates by {s['separation_mm']:.3f} mm)")
+    elif result.get("next_touch"):
+        n = result["next_touch"]
+        point = ", ".join(f"{round(x, 3) + 0.0:.3f}" for x in n["point_meas_mm"])
+        approach = ", ".join(f"{round(x, 3) + 0.0:.3f}" for x in n["approach_meas"])
+        lines.append(f"next touch: {n['feature']} at ({point}) mm, approaching along ({approach})")
+    if result.get("target"):
+        t = result["target"]
+        goal = ", ".join(f"{v:g} {unit}" for v, unit in ((t["sigma_translation_mm"], "mm"), (t["sigma_rotation_deg"], "deg"))
+                         if v is not None)
+        lines.append(f"target {goal}: met" if t["met"] else
+                     f"target {goal}: not met; {t['more_touches']} more planned touches are predicted to meet it"
+                     if t["more_touches"] else f"target {goal}: not met, nor within 30 more planned touches")
     return "\n".join(lines)
 
 
@@ -389,12 +405,16 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     parser.add_argument("--ball-radius", type=float, default=None, help="ball tip radius, mm")
     parser.add_argument("--fixture-tolerance", type=float, default=None,
                         help="profile tolerance zone width of the printed features, mm (default: as recorded; 0: exact)")
+    parser.add_argument("--target-sigma", type=float, default=None,
+                        help="accuracy wanted: RMS translation standard deviation, mm")
+    parser.add_argument("--target-sigma-deg", type=float, default=None,
+                        help="accuracy wanted: RMS rotation standard deviation, deg")
     args = parser.parse_args(argv)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # a user sees the result and one-line errors, never Python warnings
             result = register_file(features, register, args.touches, args.sigma, args.lever, args.ball_radius,
-                                   args.fixture_tolerance)
+                                   args.fixture_tolerance, target(args.target_sigma, args.target_sigma_deg))
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2
@@ -404,6 +424,12 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
         # The reader stopped (``| head``): say nothing more, and let Python's exit not complain either.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return EXIT_CODES[result["status"]]
+
+
+def target(sigma_mm, sigma_deg):
+    """The accuracy target (mm, deg) of --target-sigma and --target-sigma-deg; None when neither is given
+    (one alone leaves the other free: None)."""
+    return None if sigma_mm is None and sigma_deg is None else (sigma_mm, sigma_deg)
 
 
 def report(result, pose_format="matrix", as_json=False):

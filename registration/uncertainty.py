@@ -16,7 +16,11 @@ def covariance(jacobian, translation, sigma):
 
     ``jacobian`` (m, 6): whitened rows (covariance sigma^2 I, see :class:`Problem`).
     """
-    F = jacobian.T @ jacobian
+    return covariance_from_information(jacobian.T @ jacobian, translation, sigma)
+
+
+def covariance_from_information(F, translation, sigma):
+    """:func:`covariance` of the rows' information ``J^T J`` (6, 6)."""
     try:
         C = sigma**2 * np.linalg.inv(F)
     except np.linalg.LinAlgError:

@@ -107,3 +107,66 @@ def test_bad_input_writes_nothing(folder):
     assert not (out_dir / "plans").exists()
     assert run("plan", out_dir, "--touches", 8).returncode == 0
     assert_bad_input(run("plan", out_dir, "--touches", 8), "--force")
+
+
+def _cube():
+    from fixturecad.build import features_document
+    from fixturecad.templates import make
+
+    return features_from_json(features_document(make("cube")))
+
+
+CUBE_321 = {"top": [[10, 10, 50], [40, 10, 50], [25, 40, 50]], "front": [[10, 0, 25], [40, 0, 25]],
+            "left": [[0, 25, 25]]}
+
+
+def test_the_next_touch_adds_more_information_than_200_random_candidates():
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.patches import patch_points
+
+    features = _cube()
+    touches = {k: np.array(v, float) for k, v in CUBE_321.items()}
+    result = register_touches(features, touches, plan_next=True)
+    nxt = result["next_touch"]
+
+    def logdet(extra_feature, point):
+        more = {k: v.copy() for k, v in touches.items()}
+        more[extra_feature] = np.vstack([more[extra_feature], point])
+        cov = np.array(register_touches(features, more, initial_pose=np.eye(4))["covariance"])
+        return -np.linalg.slogdet(cov)[1]
+
+    best = logdet(nxt["feature"], nxt["point_meas_mm"])
+    rng = np.random.default_rng(200)
+    for _ in range(200):
+        fid = str(rng.choice(list(features)))
+        points = patch_points(features[fid])
+        assert best >= logdet(fid, points[rng.integers(len(points))]) - 1e-9
+
+
+def test_the_next_touch_removes_a_free_motion_and_the_target_counts_touches():
+    from fixturecad.registration.engine import register_touches
+
+    features = _cube()
+    touches = {"top": np.array(CUBE_321["top"], float), "front": np.array([[10, 0, 25], [40, 0, 25], [25, 0, 40]], float)}
+    result = register_touches(features, touches, plan_next=True)
+    assert result["status"] == "underdetermined"
+    assert result["next_touch"]["feature"] == "left"  # only the left face holds the part along x
+    # Where it says on the part (the truth is the identity; along x the pose found is arbitrary).
+    touches["left"] = np.array([result["next_touch"]["point_fixture_mm"]])
+    assert register_touches(features, touches)["status"] == "unique"
+    done = register_touches(features, touches, target_sigma=(1.0, None))["target"]
+    assert done["met"] and done["more_touches"] == 0
+    wanted = register_touches(features, touches, target_sigma=(0.005, None))
+    more = wanted["target"]["more_touches"]
+    assert not wanted["target"]["met"] and more > 0
+    # Making the predicted touches does meet it (noise-free touches: the prediction is the covariance).
+    from fixturecad.registration.planning import next_touches
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.solve import solve
+    from fixturecad.registration.touches import build_groups
+
+    solution = solve(Problem(build_groups(features, touches)))[0]
+    planned, _ = next_touches(features, solution, more)
+    for _, fid, point, _ in planned:
+        touches[fid] = np.vstack([touches.get(fid, np.zeros((0, 3))), point])
+    assert register_touches(features, touches)["sigma_translation_mm"] <= 0.005
