@@ -1,6 +1,5 @@
 """CLI: ``fixturecad plan``: a point-probe touch plan designed on the Fisher information."""
 
-from enum import Enum
 from pathlib import Path
 from typing import Annotated
 
@@ -14,20 +13,34 @@ app = typer.Typer()
 PLANS_DIR = "plans"
 MIN_TOUCHES = 6  # point-probe touches give one row each; a pose needs six
 MAX_TOUCHES = 60
+POINT_REACH = 20.0  # a point of interest farther than this many touch spreads is not one this fixture locates
 
 
-class Criterion(str, Enum):
-    d = "d"
-    a = "a"
-    e = "e"
+def _criterion(text):
+    """(criterion, point of interest (3,) or None) of --criterion; InputError if unreadable."""
+    import numpy as np
+
+    from fixturecad.registration.planning import CRITERIA
+
+    if text in CRITERIA:
+        return text, None
+    if text.startswith("point:"):
+        try:
+            point = np.array([float(x) for x in text[6:].split(",")])
+        except ValueError:
+            point = np.zeros(0)
+        if point.shape == (3,) and np.all(np.isfinite(point)):
+            return "point", point
+    raise InputError(f"--criterion must be d, a, e or point:X,Y,Z (mm), got {text!r}")
 
 
 @app.command()
 def plan(
     out_dir: Annotated[Path, typer.Argument(help="Fixture folder written by fixturecad build or design.")],
     touches: Annotated[int, typer.Option(help=f"Number of point-probe touches ({MIN_TOUCHES} to {MAX_TOUCHES}).")],
-    criterion: Annotated[Criterion, typer.Option(help="d: det of the information; a: trace of the covariance; "
-                                                      "e: the worst direction (docs/plans.md).")] = Criterion.d,
+    criterion: Annotated[str, typer.Option(help="d: det of the information; a: trace of the covariance; e: the "
+                                                "worst direction; point:X,Y,Z: the position error of that point, "
+                                                "mm, fixture frame (docs/plans.md).")] = "d",
     features: Annotated[str | None, typer.Option(help="Feature ids to touch, e.g. top,front (default: every "
                                                       "plane, sphere and cylinder).")] = None,
     margin: Annotated[float, typer.Option(help="Distance kept from every patch edge, mm.")] = 1.0,
@@ -53,6 +66,7 @@ def plan(
         raise InputError(f"--touches must be {MIN_TOUCHES} to {MAX_TOUCHES}: a pose needs six point touches")
     if not (margin >= 0 and np.isfinite(margin)):
         raise InputError(f"--margin must be a non-negative number of mm, got {margin}")
+    kind, point = _criterion(criterion)
     if not re.fullmatch(r"[a-z0-9][a-z0-9_-]*", name):
         raise InputError(f"--name must be lower-case letters, digits, - and _, got {name!r}")
     out_dir = Path(out_dir)
@@ -69,14 +83,17 @@ def plan(
         mesh = load_mesh(out_dir / "fixture.stl", document["volume_mm3"])
         candidates = planning.candidates(all_features, ids, margin,
                                          keep=lambda p, n: planning.reachable(mesh.triangles, p, n))
-        chosen = planning.design(candidates, touches, criterion.value)
+        if point is not None and np.linalg.norm(point - candidates.points.mean(0)) > POINT_REACH * candidates.length_mm:
+            raise ValueError(f"the point of interest {criterion[6:]} lies {POINT_REACH:g} fixture sizes away: "
+                             "no touch plan on this fixture locates it (give it in the fixture frame, mm)")
+        chosen = planning.design(candidates, touches, kind, point)
     except ValueError as error:
         raise InputError(str(error)) from None
     outputs = (f"{name}.json", f"{name}.csv") + ((f"{name}.png",) if preview else ())
     folder = check_files(out_dir / PLANS_DIR, outputs, force)
     entries = _entries(candidates, chosen, all_features)
     robust = planning.robust(candidates.rows[chosen], candidates.length_mm)
-    note = (f"designed by fixturecad plan: {touches} point-probe touches, criterion {criterion.value}, margin "
+    note = (f"designed by fixturecad plan: {touches} point-probe touches, criterion {criterion}, margin "
             f"{margin:g} mm; {'robust to' if robust else 'NOT robust to'} the loss of any one touch")
     record = {"contact_class": "".join("{" + lookup(e["contact"]).contact_class + "}" for e in entries
                                        for _ in e["points"]),
@@ -88,7 +105,7 @@ def plan(
     if preview:
         from fixturecad.preview import plan_scene, render
 
-        title = f"{document['template']}: plan {name!r}, {touches} touches, criterion {criterion.value}"
+        title = f"{document['template']}: plan {name!r}, {touches} touches, criterion {criterion}"
         data = plan_scene(title, np.asarray(mesh.vertices), np.asarray(mesh.faces), list(all_features.values()),
                           entries, name)
         with staged_file(folder / f"{name}.png") as path:

@@ -89,7 +89,7 @@ def simulate(
     noise: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
     lever: Annotated[float, typer.Option(help="Sensor size, mm: plane and line sensors tilt by noise/lever rad.")] = SENSOR_LEVER_MM,
     plan: Annotated[Positions, typer.Option(help="Touch positions: the plan's nominal points or random ones on the same features.")] = Positions.default,
-    touch_plan: Annotated[str, typer.Option(help="Named touch plan of features.json.")] = "default",
+    touch_plan: Annotated[str, typer.Option(help="Named touch plan of features.json, or of plans/NAME.json written by fixturecad plan.")] = "default",
     seed: Annotated[int, typer.Option(min=0, help="Seed of the random generator (0 or more).")] = 0,
     nominal: Annotated[bool, typer.Option(help="Give the routine a nominal pose (1 deg, 1 mm off the truth).")] = False,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Print the fixture within a profile tolerance zone this wide, mm (default: as recorded in features.json; 0: an exact part).")] = None,
@@ -123,6 +123,9 @@ def simulate(
     if not stl.is_file():
         raise InputError(f"no fixture.stl in {out_dir}: run fixturecad build first")
     routine = load_routine(out_dir)
+    designed = out_dir / "plans" / f"{touch_plan}.json"
+    if touch_plan not in document["plans"] and designed.is_file():  # a plan of `fixturecad plan`
+        document = {**document, "plans": {**document["plans"], touch_plan: json.loads(designed.read_text())}}
     folder = check_files(out_dir if out is None else out, (SUMMARY_NAME, PLOT_NAME), force)
     try:
         tolerance = tolerance_from_document(features_from_json(document), document, fixture_tolerance)

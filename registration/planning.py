@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mobility import matrix_rank
+from .pose import skew
 from .patches import patch_points
 from .problem import Problem
 from .touches import build_groups
@@ -80,8 +81,13 @@ def candidates(features, ids, margin_mm, keep=None) -> Candidates:
     return Candidates(names, points, normals, J, max(spread, 1.0))
 
 
-def criterion_values(information, criterion) -> np.ndarray:
-    """The value to maximise of each information matrix (..., 6, 6)."""
+def criterion_values(information, criterion, weight=None) -> np.ndarray:
+    """The value to maximise of each information matrix (..., 6, 6); ``point``: minus the variance of a point's
+    position, ``weight`` (3, 6) its displacement per (scaled) twist."""
+    if criterion == "point":
+        eigen = np.linalg.eigvalsh(information)
+        variance = np.trace(weight @ np.linalg.pinv(information) @ weight.T, axis1=-2, axis2=-1)
+        return np.where(eigen[..., 0] > 1e-12 * np.maximum(eigen[..., -1], 1e-300), -variance, -np.inf)
     if criterion == "d":
         sign, logdet = np.linalg.slogdet(information)
         return np.where(sign > 0, logdet, -np.inf)
@@ -91,18 +97,24 @@ def criterion_values(information, criterion) -> np.ndarray:
     return np.where(eigen[..., 0] > 0, -np.sum(1.0 / np.maximum(eigen, 1e-300), axis=-1), -np.inf)
 
 
-def design(cands: Candidates, count, criterion="d") -> list:
-    """Indices of ``count`` candidates chosen to maximise the criterion; ValueError if they cannot locate."""
-    if criterion not in CRITERIA:
-        raise ValueError(f"unknown criterion {criterion!r}; choose from {', '.join(CRITERIA)}")
-    rows = cands.rows * np.r_[np.full(3, 1.0 / cands.length_mm), np.ones(3)]  # rotations per touch spread
+def design(cands: Candidates, count, criterion="d", point=None) -> list:
+    """Indices of ``count`` candidates chosen to maximise the criterion (``point``: the position error of that
+    point of interest (3,), mm, fixture frame); ValueError if they cannot locate."""
+    if criterion not in CRITERIA + ("point",):
+        raise ValueError(f"unknown criterion {criterion!r}; choose from {', '.join(CRITERIA)} or point:X,Y,Z")
+    scale = np.r_[np.full(3, 1.0 / cands.length_mm), np.ones(3)]  # rotations per touch spread
+    rows = cands.rows * scale
+    # A point x moves by omega x x + v under a twist: in scaled twists, by [-[x]x L, I].
+    weight = None if point is None else np.hstack([-skew(point) / scale[:3], np.eye(3)])
+    value = lambda F: criterion_values(F, criterion, weight)  # noqa: E731
     outer = np.einsum("ni,nj->nij", rows, rows)
     ridge = RIDGE * np.trace(outer.sum(0)) / 6 * np.eye(6)
     chosen = []
     information = np.zeros((6, 6))
     for _ in range(count):
         # While the plan is short of rank 6 the determinant is zero: grow the regularised one.
-        values = criterion_values(information + ridge + outer, "d" if len(chosen) < 6 else criterion)
+        values = (criterion_values(information + ridge + outer, "d") if len(chosen) < 6 else
+                  value(information + outer))
         values[chosen] = -np.inf
         best = int(np.argmax(values))
         chosen.append(best)
@@ -111,10 +123,11 @@ def design(cands: Candidates, count, criterion="d") -> list:
         improved = False
         for slot in range(count):
             without = information - outer[chosen[slot]]
-            values = criterion_values(without + outer, criterion)
+            values = value(without + outer)
             values[chosen] = -np.inf
             best = int(np.argmax(values))
-            if values[best] > criterion_values(information, criterion) + 1e-12 * abs(criterion_values(information, criterion)):
+            now = value(information)
+            if values[best] > now + 1e-12 * abs(now):
                 information = without + outer[best]
                 chosen[slot] = best
                 improved = True

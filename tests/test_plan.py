@@ -61,6 +61,8 @@ def test_planned_touches_lie_on_their_patches_are_reachable_and_locate(folder, n
     reg = run("register", out_dir, out_dir / "plans" / "designed.csv", "--json")
     assert reg.returncode == 0, reg.stderr
     assert np.abs(np.array(json.loads(reg.stdout)["pose"]) - np.eye(4)).max() < 1e-3
+    sim = run("simulate", out_dir, "--trials", 5, "--touch-plan", "designed")
+    assert sim.returncode == 0 and "(designed)" in sim.stdout and "unique 5" in sim.stdout, sim.stdout + sim.stderr
 
 
 @pytest.mark.parametrize("name, count", [("cube", 6), ("v-block", 6)])
@@ -170,3 +172,23 @@ def test_the_next_touch_removes_a_free_motion_and_the_target_counts_touches():
     for _, fid, point, _ in planned:
         touches[fid] = np.vstack([touches.get(fid, np.zeros((0, 3))), point])
     assert register_touches(features, touches)["sigma_translation_mm"] <= 0.005
+
+
+def test_a_point_of_interest_is_located_better_by_its_own_plan():
+    """The position error of a tool point 100 mm off the cube, from the plans' covariances."""
+    from fixturecad.registration.pose import skew
+    from fixturecad.registration.uncertainty import covariance
+
+    features = _cube()
+    cands = planning.candidates(features, surface_ids(features), 1.0)
+    point = np.array([120.0, 90.0, 60.0])
+
+    def variance(chosen):
+        # covariance() is over (rotation, fixture origin): the point moves by omega x (x - 0) + origin shift.
+        cov = covariance(cands.rows[chosen], np.zeros(3), 0.005)
+        J = np.hstack([-skew(point), np.eye(3)])
+        return np.trace(J @ cov @ J.T)
+
+    own = variance(planning.design(cands, 8, "point", point))
+    for criterion in planning.CRITERIA:
+        assert own <= variance(planning.design(cands, 8, criterion)) + 1e-15
