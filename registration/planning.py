@@ -135,6 +135,34 @@ def design(cands: Candidates, count, criterion="d", point=None) -> list:
             break
     if matrix_rank(cands.rows[chosen], cands.length_mm) < 6:
         raise ValueError("these features cannot locate the part with point-probe touches: add features")
+    if count > 6 and not robust(cands.rows[chosen], cands.length_mm):
+        chosen = _robust_exchange(outer, chosen)
+    return chosen
+
+
+def _robust_exchange(outer, chosen):
+    """Exchange for the worst case of losing one touch (the smallest determinant of the plan less any one
+    touch), so that every touch is checked by the others when the count allows."""
+    chosen = list(chosen)
+
+    def worst(sets):  # (k, count) index sets -> the smallest log det over each set less one touch
+        total = outer[sets].sum(axis=1)
+        less = total[:, None] - outer[sets]
+        return criterion_values(less, "d").min(axis=1)
+
+    for _ in range(EXCHANGE_PASSES):
+        improved = False
+        for slot in range(len(chosen)):
+            sets = np.repeat(np.array(chosen)[None], len(outer), axis=0)
+            sets[:, slot] = np.arange(len(outer))
+            values = worst(sets)
+            values[chosen] = -np.inf
+            best = int(np.argmax(values))
+            if values[best] > worst(np.array([chosen]))[0]:
+                chosen[slot] = best
+                improved = True
+        if not improved:
+            break
     return chosen
 
 

@@ -192,3 +192,14 @@ def test_a_point_of_interest_is_located_better_by_its_own_plan():
     own = variance(planning.design(cands, 8, "point", point))
     for criterion in planning.CRITERIA:
         assert own <= variance(planning.design(cands, 8, criterion)) + 1e-15
+
+
+def test_seven_or_more_touches_survive_the_loss_of_any_one(built):
+    """On the inclined plane and cylinder the D-optimal plan puts only three touches on the plane; the
+    plan then trades some determinant for every touch checked by the others."""
+    features = features_from_json(json.loads((built("inclined-plane-cylinder") / "features.json").read_text()))
+    cands = planning.candidates(features, surface_ids(features), 1.0)
+    for count in (7, 9):
+        chosen = planning.design(cands, count, "d")
+        assert planning.robust(cands.rows[chosen], cands.length_mm)
+        assert all(matrix_rank(np.delete(cands.rows[chosen], k, axis=0), cands.length_mm) == 6 for k in range(count))
