@@ -139,7 +139,8 @@ MAX_MORE_TOUCHES = 30  # planned touches tried before a target is called out of 
 
 
 def _next_touch(features, solution):
-    (_, fid, point, normal), = next_touches(features, solution)[0]
+    planned, _ = next_touches(features, solution)
+    _, fid, point, normal = planned[0]
     R, t = solution.rotation, solution.translation
     return {"feature": fid, "point_fixture_mm": point.tolist(), "point_meas_mm": (R @ point + t).tolist(),
             "approach_meas": (-(R @ normal)).tolist()}

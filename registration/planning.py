@@ -58,7 +58,7 @@ def candidates(features, ids, margin_mm, keep=None) -> Candidates:
         if feature.kind not in ("plane", "sphere", "cylinder"):
             raise ValueError(f"feature {fid} is a {feature.kind}: a point probe touches planes, spheres and cylinders")
         p = patch_points(feature)
-        p = p[feature.extent.margin(p, feature._parameter(p)) >= margin_mm]
+        p = p[feature.contains(p, tol_mm=-margin_mm)]  # at least margin_mm inside the patch
         p = p[::max(1, len(p) // CANDIDATES_PER_FEATURE)]
         n = feature.normal_at(p) if len(p) else np.zeros((0, 3))
         if keep is not None and len(p):
