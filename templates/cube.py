@@ -1,9 +1,11 @@
-"""Cube (the paper's Fig. 1): six point-to-plane touches, 3-2-1.
+"""Cube (the paper's Fig. 1): point-to-plane touches on three faces, 3-2-1 and more.
 
 The cube occupies [0, s]^3. Fixture frame: origin at the corner where the
 three sensing faces' planes meet, axes along the cube edges. Sensing:
-``top`` (z = s, outward +Z, 3 touches), ``front`` (y = 0, outward -Y, 2) and
-``left`` (x = 0, outward -X, 1). The base hangs from the bottom face.
+``top`` (z = s, outward +Z), ``front`` (y = 0, outward -Y) and ``left``
+(x = 0, outward -X). The ``minimal`` plan is the paper's 3-2-1 (six touches,
+none checked by the others); the default plan touches each face four times.
+The base hangs from the bottom face.
 """
 
 import numpy as np
@@ -15,7 +17,7 @@ from fixturecad.templates.base import Anchor, Param, Plan, Template, box_halfspa
 
 class Cube(Template):
     name = "cube"
-    title = "cube touched 3-2-1 on three mutually perpendicular faces"
+    title = "cube touched on three mutually perpendicular faces"
     origin = "paper Fig. 1"
     PARAMS = (Param("size", "mm", 50.0, 5.0, 1000.0, "edge length of the cube", "s"),)
     contact_class = "{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}"
@@ -48,9 +50,19 @@ class Cube(Template):
 
     def touch_plans(self) -> dict:
         s = self.size
-        plan = [
-            touch("P/F-PL/M", "top", s * np.array([[0.2, 0.2, 1], [0.8, 0.2, 1], [0.5, 0.8, 1]])),
-            touch("P/F-PL/M", "front", s * np.array([[0.2, 0, 0.5], [0.8, 0, 0.5]])),
-            touch("P/F-PL/M", "left", s * np.array([[0, 0.5, 0.5]])),
-        ]
-        return {"default": Plan(self.contact_class, plan, "3-2-1 point-to-plane touches")}
+        # 3-2-1, then a fourth touch on each face: every touch checked by the others, also with any one left out
+        # (docs/plans.md).
+        top = [[0.2, 0.2, 1], [0.8, 0.2, 1], [0.5, 0.8, 1], [0.2, 0.8, 1]]
+        front = [[0.2, 0, 0.5], [0.8, 0, 0.5], [0.5, 0, 0.2], [0.5, 0, 0.8]]
+        left = [[0, 0.5, 0.5], [0, 0.2, 0.2], [0, 0.8, 0.2], [0, 0.5, 0.8]]
+
+        def plan(top_count, front_count, left_count):
+            return [touch("P/F-PL/M", "top", s * np.array(top[:top_count])),
+                    touch("P/F-PL/M", "front", s * np.array(front[:front_count])),
+                    touch("P/F-PL/M", "left", s * np.array(left[:left_count]))]
+
+        return {
+            "default": Plan(self.contact_class, plan(4, 4, 4),
+                            "4-4-4 point-to-plane touches: a single touch off or mislabelled is found and named"),
+            "minimal": Plan(self.contact_class, plan(3, 2, 1), "3-2-1 point-to-plane touches: none is checked"),
+        }

@@ -7,8 +7,10 @@ the two flat faces meet. Sensing features: ``flat_a`` (z = 0, outward -Z),
 
 The paper's contacts, class {G3}{S-S}{S-T2}{C-R-C}: PL/F-PL/F on ``flat_a``,
 P/F-S/M on ``sphere``, P/F-PL/M on ``flat_b`` and L/M-L/M on ``edge``. The
-sphere contact leaves two solutions along the edge; the default plan adds a
-second sphere touch to pick one. The ``point-probe`` plan needs only a point
+sphere contact leaves two solutions along the edge; the ``minimal`` plan adds
+a second sphere touch to pick one, and the default plan seven point touches
+more (three on ``flat_a``, two on ``flat_b``, two on the sphere) so that the
+touches check each other. The ``point-probe`` plan needs only a point
 probe: 3 + 2 touches on the flats and 2 on the sphere.
 
 The mounting base leaves the spherical face near the +X end of the edge, along
@@ -105,8 +107,16 @@ class QuarterSphere(Template):
             touch("P/F-PL/M", "flat_b", flat_b),
             touch("P/F-S/M", "sphere", [sphere_1, sphere_2]),
         ]
+        minimal = paper + [touch("P/F-S/M", "sphere", sphere_2)]
+        # Point touches on both flats and the sphere: every touch checked by the others, also with any one left
+        # out (docs/plans.md).
+        checks = [touch("P/F-PL/M", "flat_a", flat_a), touch("P/F-PL/M", "flat_b", [flat_b[0], [0, 0, 0.7 * r]]),
+                  touch("P/F-S/M", "sphere", r * np.array([unit([0.1, 0.5, 0.8]), unit([-0.6, 0.7, 0.3])]))]
         return {
-            "default": Plan(self.contact_class, paper + [touch("P/F-S/M", "sphere", sphere_2)],
+            "default": Plan(self.contact_class, minimal + checks,
+                            "the paper's four contacts, a second sphere touch and seven point touches: a single "
+                            "touch off or mislabelled is found and named"),
+            "minimal": Plan(self.contact_class, minimal,
                             "the paper's four contacts plus a second sphere touch that removes the two-fold solution"),
             # The sphere touch is met again with the part moved along the edge by twice its x.
             "paper": Plan(self.contact_class, paper, f"Example One exactly: two exact solutions, the second "

@@ -1,4 +1,4 @@
-"""V-block: a block with a V-groove and a flat end face, touched 3-2-1.
+"""V-block: a block with a V-groove and a flat end face, touched on the groove walls and the end.
 
 Shop-floor datum for shafts and for robot tool registration. The block
 occupies x in [0, s], y in [-s/2, s/2], z in [-s, 0]; the groove runs along
@@ -6,8 +6,9 @@ X with its bottom line at z = -depth and walls at half the included
 ``angle`` from the vertical. Fixture frame: origin where the top face meets
 the end face above the groove bottom. Sensing: ``groove_a`` (wall at y > 0),
 ``groove_b`` (wall at y < 0) and ``end`` (x = 0, its rectangle below the
-groove). Six P/F-PL/M touches, 3 on ``groove_a``, 2 on ``groove_b``, 1 on
-``end``: class {S-T2}x6. The base hangs from the bottom face.
+groove). The ``minimal`` plan: six P/F-PL/M touches, 3 on ``groove_a``, 2 on
+``groove_b``, 1 on ``end`` (class {S-T2}x6, none checked by the others); the
+default plan touches each face four times. The base hangs from the bottom face.
 """
 
 import math
@@ -22,7 +23,7 @@ from fixturecad.templates.base import Anchor, Param, Plan, Template, halfspace, 
 
 class VBlock(Template):
     name = "v-block"
-    title = "block with a V-groove and an end face, touched 3-2-1"
+    title = "block with a V-groove and an end face"
     origin = "shop-floor V-block datum"
     PARAMS = (
         Param("size", "mm", 60.0, 10.0, 1000.0, "edge length of the block", "s"),
@@ -86,9 +87,20 @@ class VBlock(Template):
 
     def touch_plans(self) -> dict:
         s, d = self.size, self.depth
-        plan = [
-            touch("P/F-PL/M", "groove_a", self._on_wall(+1, [0.2 * s, 0.8 * s, 0.5 * s], [0.3, 0.3, 0.7])),
-            touch("P/F-PL/M", "groove_b", self._on_wall(-1, [0.2 * s, 0.8 * s], [0.5, 0.5])),
-            touch("P/F-PL/M", "end", [0.0, 0.0, -(d + s) / 2]),
-        ]
-        return {"default": Plan(self.contact_class, plan, "3-2-1 point-to-plane touches on the groove walls and end")}
+        # 3-2-1, then more on each face up to four: every touch checked by the others, also with any one left
+        # out (docs/plans.md).
+        wall_a = self._on_wall(+1, s * np.array([0.2, 0.8, 0.5, 0.5]), [0.3, 0.3, 0.7, 0.2])
+        wall_b = self._on_wall(-1, s * np.array([0.2, 0.8, 0.5, 0.5]), [0.5, 0.5, 0.2, 0.8])
+        end = np.array([[0.0, 0.0, -(d + s) / 2], [0.0, -0.35 * s, -0.9 * s], [0.0, 0.35 * s, -0.9 * s],
+                        [0.0, 0.0, -0.45 * s]])
+
+        def plan(a_count, b_count, end_count):
+            return [touch("P/F-PL/M", "groove_a", wall_a[:a_count]), touch("P/F-PL/M", "groove_b", wall_b[:b_count]),
+                    touch("P/F-PL/M", "end", end[:end_count])]
+
+        return {
+            "default": Plan(self.contact_class, plan(4, 4, 4), "4-4-4 point-to-plane touches on the groove walls and "
+                            "end: a single touch off or mislabelled is found and named"),
+            "minimal": Plan(self.contact_class, plan(3, 2, 1),
+                            "3-2-1 point-to-plane touches on the groove walls and end: none is checked"),
+        }

@@ -292,7 +292,7 @@ def test_three_collinear_touches_on_a_plane_are_underdetermined():
 
 
 def test_collinear_touches_in_a_full_plan_name_the_missing_rotation():
-    features, entries = _plan("cube", "default")
+    features, entries = _plan("cube", "minimal")
     truth = _random_pose(np.random.default_rng(6))
     touches, _ = plan_touches(entries, truth)
     top = touches["top"]

@@ -172,7 +172,7 @@ def test_inclined_plane_cylinder_frame_follows_the_paper():
     assert np.allclose(y / np.linalg.norm(y), [0, 1, 0])
     assert np.allclose(np.cross([0, 1, 0], s), [1, 0, 0])  # X = Y x Z
     assert np.allclose(plane.point, 0) and plane.signed_distance([0, 0, 0])[0] == 0  # origin on the axis and plane
-    cylinder_touches = [e for e in fixture.touch_plans()["default"].touches if e["feature"] == "cylinder"]
+    cylinder_touches = [e for e in fixture.touch_plans()["minimal"].touches if e["feature"] == "cylinder"]
     assert sum(len(e["points"]) for e in cylinder_touches) == 4
 
 

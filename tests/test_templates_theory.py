@@ -47,7 +47,7 @@ def test_concrete_plan_has_mobility_zero(template, plan_name):
 def test_three_collinear_plane_touches_are_degenerate_though_the_class_is_not():
     """The paper's warning: the catalogue speaks of generic placements only."""
     fixture = make("cube")
-    plan = fixture.touch_plans()["default"]
+    plan = fixture.touch_plans()["minimal"]
     entries = [dict(e) for e in plan.touches]
     first = entries[0]
     points = np.reshape(first["points"], (-1, 3))
