@@ -200,7 +200,8 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
     result = routine.register(touches, initial_pose=initial, sigma_mm=sigma, contacts=contacts, lever_mm=lever,
                               fixture_tolerance_mm=zone)
     elapsed = time.perf_counter() - start
-    err_t, err_r = pose_errors(np.array(result["pose"]), truth)
+    # An inconsistent result with no explanation gives no pose: no error to count.
+    err_t, err_r = (np.nan, np.nan) if result["pose"] is None else pose_errors(np.array(result["pose"]), truth)
     # The bound of the noise actually drawn (the routine's sigma also allows for the STL's chords).
     noise_model = noise if noise > 0 else sigma
     groups = build_groups(sampler.features, touches, 0.0, contacts)
@@ -231,7 +232,8 @@ def _unit(rng):
 
 
 def summarise(records, noise):
-    """Median, 95th percentile and RMS of the errors, success rate, ratio of RMS error to the bound."""
+    """Median, 95th percentile and RMS of the errors (of the trials that gave a pose), success rate, ratio of
+    RMS error to the bound."""
     import numpy as np
 
     et = np.array([r["translation_error_mm"] for r in records])
@@ -247,13 +249,13 @@ def summarise(records, noise):
     statuses = {}
     for r in records:
         statuses[r["status"]] = statuses.get(r["status"], 0) + 1
-    rms_t, rms_r = float(np.sqrt(np.mean(et**2))), float(np.sqrt(np.mean(er**2)))
+    rms_t, rms_r = float(np.sqrt(np.nanmean(et**2))), float(np.sqrt(np.nanmean(er**2)))
     crb_t, crb_r = float(np.sqrt(np.nanmean(bt**2))), float(np.sqrt(np.nanmean(br**2)))
     return {
-        "median_translation_error_mm": float(np.median(et)),
-        "p95_translation_error_mm": float(np.percentile(et, 95)),
-        "median_rotation_error_deg": float(np.median(er)),
-        "p95_rotation_error_deg": float(np.percentile(er, 95)),
+        "median_translation_error_mm": float(np.nanmedian(et)),
+        "p95_translation_error_mm": float(np.nanpercentile(et, 95)),
+        "median_rotation_error_deg": float(np.nanmedian(er)),
+        "p95_rotation_error_deg": float(np.nanpercentile(er, 95)),
         "rms_translation_error_mm": rms_t,
         "rms_rotation_error_deg": rms_r,
         "crb_translation_mm": crb_t,
@@ -280,7 +282,7 @@ def _split(records):
         if f"{source}_translation_error_mm" in records[0]:
             for key, unit in (("translation_error", "mm"), ("rotation_error", "deg")):
                 values = np.array([r[f"{source}_{key}_{unit}"] for r in records])
-                out[f"{source}_rms_{key}_{unit}"] = float(np.sqrt(np.mean(values**2)))
+                out[f"{source}_rms_{key}_{unit}"] = float(np.sqrt(np.nanmean(values**2)))
     return out
 
 

@@ -10,36 +10,88 @@ from .least_squares import levenberg_marquardt
 from .patches import patch_points
 from .problem import Problem
 from .solve import solve
-from .verdict import Solution, judged
+from .touches import point_touches
+from .verdict import Solution, judged, same_pose
 
-def robust_flag(problem, solution):
-    """A touch whose removal makes the touches consistent, found by a Cauchy-weighted refit.
+SCREEN_STARTS = 4  # candidate poses of the whole set an explanation is looked for from, lowest cost first
+SOLVED_AFRESH = 3  # when that finds none: touches left out and solved from scratch, the robust fit's worst first
 
-    The robust (Cauchy) fit ranks the touches by residual; the worst are left
-    out in turn. Returns (touch index, refit Solution, its distance mm from its feature at the
-    refit pose) or None.
+
+def explanations(problem, features, solutions, initial_pose=None):
+    """Every single touch whose removal, or whose move to another feature (a mislabelled touch), leaves
+    touches that an admissible pose fits, with the poses it leads to.
+
+    Each touch is left out in turn and the rest refined from a robust (Cauchy)
+    fit of the whole set, which an outlier hardly pulls, from each of its
+    ``SCREEN_STARTS`` lowest-cost candidate poses (``solutions``), and from those
+    candidates themselves. When no removal fits, an outlier far off may have
+    pulled every candidate away: the ``SOLVED_AFRESH`` touches the robust fit
+    finds worst are left out and solved from scratch (from ``initial_pose``
+    when given). A point or ball touch whose removal explains it is also put
+    on every other feature, refined from the poses its removal leads to (a
+    label that fits implies a removal that does). Returns
+    [(touch index, the feature it is moved to or None when left out, Solution
+    passing the residual test at rank 6 with admissible touches, the touch's
+    distance mm from its labelled feature at that pose)].
     """
-    sigma = problem.sigma
-    R, t = solution.rotation, solution.translation
-    scale = 3.0 * sigma
-    r = solution.residuals
-    for _ in range(5):
-        weights = 1.0 / (1.0 + (r / scale) ** 2)
-        R, t, r, _ = levenberg_marquardt(problem, R, t, weights=weights, max_iterations=20)
-    per_touch = {}
-    for touch, value in zip(problem.row_touch, r):
-        per_touch[int(touch)] = per_touch.get(int(touch), 0.0) + float(value) ** 2
-    # Leave out the worst touches in turn and solve again from scratch.
-    for touch in sorted(per_touch, key=lambda k: -per_touch[k]):
-        reduced = problem.without(touch)
-        if reduced.size <= 6:
-            continue
-        good = [s for s in solve(reduced) if s.passes and s.admissible and s.rank == 6]
-        if good:
-            # How far the touch is off at the refit pose (the robust fit's weights shrank its residual).
-            rows, _ = problem.sensor_rows(good[0].rotation, good[0].translation)
-            return touch, good[0], float(np.linalg.norm(rows[problem.row_touch == touch]))
-    return None
+    candidates = [(s.rotation, s.translation) for s in solutions[:SCREEN_STARTS]]
+    robust = [_robust_pose(problem, R, t) for R, t in candidates]
+    touches = list(dict.fromkeys(int(k) for k in problem.row_touch))
+    left_out = {touch: _fits_from(problem.without(touch), robust + candidates) for touch in touches}
+    if not any(left_out.values()):
+        r = problem.evaluate(*robust[0])[0]
+        worst = sorted(touches, key=lambda k: -float(np.sum(r[problem.row_touch == k] ** 2)))
+        left_out = {touch: _fits(problem.without(touch), initial_pose) for touch in worst[:SOLVED_AFRESH]}
+    found = []
+    for touch, fits in left_out.items():
+        tries = [(None, fits)]
+        group = next(g for g in problem.groups if touch in g.index)
+        if fits and group.points is not None:
+            poses = [(s.rotation, s.translation) for s in fits]
+            tries += [(fid, _fits_from(_moved(problem.without(touch), group, feature, touch), poses))
+                      for fid, feature in features.items() if fid != group.feature.id]
+        for relabel, fitting in tries:
+            for solution in fitting:
+                rows, _ = problem.sensor_rows(solution.rotation, solution.translation)
+                found.append((touch, relabel, solution, float(np.linalg.norm(rows[problem.row_touch == touch]))))
+    return found
+
+
+def _fits(problem, initial_pose):
+    """Every admissible rank-6 pose passing the residual test, solved from scratch."""
+    return [s for s in solve(problem, initial_pose) if s.passes and s.admissible and s.rank == 6]
+
+
+def _robust_pose(problem, R, t, iterations=5):
+    """(R, t) of a Cauchy-weighted fit from (R, t): a few touches far off hardly pull it."""
+    r = problem.evaluate(R, t)[0]
+    scale = 3.0 * problem.sigma
+    for _ in range(iterations):
+        R, t, r, _ = levenberg_marquardt(problem, R, t, weights=1.0 / (1.0 + (r / scale) ** 2), max_iterations=20)
+    return R, t
+
+
+def _fits_from(problem, starts):
+    """The distinct admissible rank-6 poses passing the residual test refined from ``starts``."""
+    length = problem.scale()
+    found = []
+    for R, t in starts:
+        R, t, r, J = levenberg_marquardt(problem, R, t)
+        solution = judged(problem, Solution(R, t, r, J), length)
+        if (solution.passes and solution.admissible and solution.rank == 6
+                and not any(same_pose((R, t), (s.rotation, s.translation)) for s in found)):
+            found.append(solution)
+    return found
+
+
+def _moved(reduced, group, feature, touch):
+    """``reduced`` (without ``touch``) with that touch of ``group`` put on ``feature`` instead."""
+    k = int(np.flatnonzero(group.index == touch)[0])
+    radius = float(np.reshape(group.sensor["r"], -1)[k]) if group.ctype.sensor == "S" else 0.0
+    moved = point_touches(feature, group.points[k], [touch], radius)
+    if group.approach is not None:
+        moved.approach = group.approach[k:k + 1]
+    return Problem(reduced.groups + [moved], reduced.sigma, reduced.lever, reduced.tolerance)
 
 
 def features_beyond_tolerance(problem, solutions, starts=4):

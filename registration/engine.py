@@ -13,8 +13,9 @@ judged by a chi-square test and whether its touches could have happened
 * ``unique``: one admissible pose passes;
 * ``ambiguous``: several do, with the touch that best separates them
   (:mod:`.ambiguity`);
-* ``inconsistent``: none does, with the touch or the printed feature whose
-  deviation explains it when one does;
+* ``inconsistent``: none does, with every touch whose removal (or other
+  label) explains it and the pose it leads to, and the printed feature whose
+  deviation does (:mod:`.ambiguity`); a pose only when one explanation gives one;
 * ``underdetermined``: the touches leave motions free, named relative to the
   features (:mod:`.motions`);
 
@@ -26,7 +27,8 @@ This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 
-from .ambiguity import features_beyond_tolerance, robust_flag, separating_touch
+from .ambiguity import explanations, features_beyond_tolerance, separating_touch
+from .least_squares import levenberg_marquardt
 from .motions import free_motions
 from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 from .problem import Problem
@@ -35,6 +37,7 @@ from .redundancy import redundancy
 from .solve import solve
 from .touches import build_groups
 from .uncertainty import covariance, covariance_from_information, sigmas
+from .verdict import Solution, judged, same_pose
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
@@ -63,17 +66,23 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
 
     Returns
     -------
-    dict with ``pose`` (4x4 nested list, fixture2meas), ``status`` ("unique",
+    dict with ``pose`` (4x4 nested list, fixture2meas; None when inconsistent and not explained by one touch
+    or one printed feature leading to one pose), ``status`` ("unique",
     "ambiguous", "inconsistent" or "underdetermined"), ``rms_residual_mm``,
     ``solutions`` (each ``pose``, ``rms_residual_mm``, of the whitened rows; every admissible pose that
     passes the chi-square test, best first), ``covariance`` (6x6 over rotation
     vector rad and fixture origin mm, None when underdetermined),
     ``sigma_translation_mm``, ``sigma_rotation_deg``, ``free_motions`` (names),
     ``separating_touch`` (ambiguous: where one more touch tells the candidates
-    apart), ``flagged`` (inconsistent: the touch left out, e.g. mislabelled),
-    ``inadmissible`` (touches off their patch or touched from inside at
-    ``pose``), ``touches``, ``rows``, ``rank``, ``redundancy`` (how well the
-    touches check each other, :mod:`.redundancy`).
+    apart), ``flagged`` (inconsistent: every touch whose removal, or whose
+    ``relabel`` onto another feature, leaves touches an admissible pose fits,
+    each with that ``pose``, its ``rms_residual_mm`` and the touch's
+    ``residual_mm`` off its feature there), ``culprit`` (the touch index when
+    only one touch explains it, else None), ``inadmissible`` (touches off their
+    patch or touched from inside at ``pose``), ``touches``, ``rows``, ``rank``,
+    ``redundancy`` (how well the touches check each other, :mod:`.redundancy`);
+    with no pose, ``rms_residual_mm``, ``inadmissible``, ``rank`` and
+    ``redundancy`` are those of the lowest-cost candidate.
     """
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
     problem = Problem(groups, sigma_mm, lever_mm, tolerance)
@@ -81,8 +90,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         raise ValueError("no touches given: every feature's list of touches is empty")
     solutions = solve(problem, initial_pose)
     best = solutions[0]
-    result = {"flagged": [], "fixture_flagged": [], "free_motions": [], "separating_touch": None}
+    result = {"flagged": [], "culprit": None, "fixture_flagged": [], "free_motions": [], "separating_touch": None}
     good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
+    checked = None  # the answer judged with all touches, when it comes from a refit without one
     if best.rank < 6:
         status = "underdetermined"
         result["free_motions"] = free_motions(problem, best, features)
@@ -94,45 +104,80 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         best = good[0]
         result["separating_touch"] = separating_touch(features, good)
     else:
-        status = "inconsistent"
-        # Two kinds of explanation, both listed: a touch that is off, a feature printed beyond its tolerance.
+        # Two kinds of explanation, both listed: a touch that is off or mislabelled, a feature printed beyond
+        # its tolerance.
         off = features_beyond_tolerance(problem, solutions) if problem.tolerance is not None else []
         result["fixture_flagged"] = [{"feature": fid, "mode": mode, "deviation": value, "departure_mm": mm}
                                      for fid, mode, value, mm, _ in off]
-        flagged = robust_flag(problem, best) if problem.size > 7 else None
-        if flagged is None and off:
-            best = off[0][-1]
-            good = [item[-1] for item in off]
-        elif flagged is not None:
-            touch, refit, size = flagged
+        explained = explanations(problem, features, solutions, initial_pose)
+        missed = _missed(problem, explained)
+        if missed:
+            # The search missed them: poses that fit every touch after all.
+            status, best, good = "unique" if len(missed) == 1 else "ambiguous", missed[0], missed
+            if len(missed) > 1:
+                result["separating_touch"] = separating_touch(features, missed)
+        else:
+            status = "inconsistent"
             feature_of = {int(i): g.feature.id for g in groups for i in g.index}
-            result["flagged"] = [{"touch": touch, "feature": feature_of[touch], "residual_mm": size}]
-            best = refit
-            good = [refit]
-    shown = good if good else [best]
-    cov = covariance(best.jacobian, best.translation, problem.sigma) if best.rank == 6 else None
+            result["flagged"] = [{"touch": touch, "feature": feature_of[touch], "relabel": relabel,
+                                  "residual_mm": size, "pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms}
+                                 for touch, relabel, s, size in explained]
+            culprits = {touch for touch, _, _, _ in explained}
+            result["culprit"] = culprits.pop() if len(culprits) == 1 else None
+            # The answer only when one touch explains it, leading to one pose (refitted without it, or else on
+            # the feature it fits on), or else one printed feature's deviation; never a pose that fails the test.
+            if result["culprit"] is not None:
+                left_out = [s for _, relabel, s, _ in explained if relabel is None]
+                good = _distinct(left_out or [s for _, _, s, _ in explained])
+            else:
+                good = [] if explained else [item[-1] for item in off]
+            best = good[0] if len(good) == 1 else None
+            if best is not None:
+                checked = Solution(best.rotation, best.translation, *problem.evaluate(best.rotation, best.translation),
+                                   best.rank)
+    answer = best if best is not None else solutions[0]  # with no answer, what is said of the lowest-cost pose
+    shown = (good or [best]) if best is not None else []
+    cov = covariance(answer.jacobian, answer.translation, problem.sigma) if best is not None and answer.rank == 6 else None
     s_t, s_r = sigmas(cov)
     result.update(
         {
-            "pose": best.fixture2meas.tolist(),
+            "pose": None if best is None else best.fixture2meas.tolist(),
             "status": status,
-            "inadmissible": sorted(best.outside),
-            "rms_residual_mm": best.rms,
+            "inadmissible": sorted(answer.outside),
+            "rms_residual_mm": answer.rms,
             "solutions": [{"pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms} for s in shown],
             "covariance": None if cov is None else cov.tolist(),
             "sigma_translation_mm": s_t,
             "sigma_rotation_deg": s_r,
             "touches": int(sum(g.count for g in groups)),
             "rows": problem.size,
-            "rank": best.rank,
-            "redundancy": redundancy(problem, best),
+            "rank": answer.rank,
+            "redundancy": redundancy(problem, checked or answer),
         }
     )
+    if best is None:
+        return result  # no pose to plan the next touch or a target from
     if plan_next:
         result["next_touch"] = result["separating_touch"] or _next_touch(features, best)
     if target_sigma is not None:
         result["target"] = _target(features, best, problem.sigma, target_sigma, (s_t, s_r))
     return result
+
+
+def _missed(problem, explained):
+    """The distinct poses the explanations lead to that, refined with every touch, pass: ones the search missed."""
+    refined = [judged(problem, Solution(*levenberg_marquardt(problem, s.rotation, s.translation)), problem.scale())
+               for _, _, s, _ in explained]
+    return _distinct([s for s in refined if s.passes and s.admissible and s.rank == 6])
+
+
+def _distinct(solutions):
+    """The solutions with repeats of one pose left out."""
+    out = []
+    for s in solutions:
+        if not any(same_pose((s.rotation, s.translation), (o.rotation, o.translation)) for o in out):
+            out.append(s)
+    return out
 
 
 MAX_MORE_TOUCHES = 30  # planned touches tried before a target is called out of reach

@@ -24,8 +24,6 @@ def redundancy(problem, solution) -> dict:
     (by touch index: the smallest error of it that the residual test finds, None when unchecked)."""
     J = solution.jacobian
     touches = problem.row_touch
-    if len(J) != len(touches):  # a refit with a flagged touch left out: judge all touches at its pose
-        J = problem.evaluate(solution.rotation, solution.translation)[1]
     out = {"rows_beyond_six": int(len(J) - solution.rank), "unchecked": [],
            "detectable_mm": [None] * (int(touches.max()) + 1 if len(touches) else 0)}
     if solution.rank < 6:

@@ -331,7 +331,13 @@ def format_result(result, pose_format="matrix"):
         lines.append(
             f"sigma: {result['sigma_translation_mm']:.6f} mm, {result['sigma_rotation_deg']:.6f} deg"
         )
-    lines.append(format_pose(pose_format, result["pose"], result["covariance"]))
+    rows = result.get("touch_rows")
+    if result["pose"] is not None:
+        lines.append(format_pose(pose_format, result["pose"], result["covariance"]))
+    elif result["flagged"]:
+        lines.append("pose: none (several touches could each explain the inconsistency: see flagged)")
+    else:
+        lines.append("pose: none (no single touch, label or printed feature explains the inconsistency)")
     if len(result["solutions"]) > 1:
         lines.append(f"{len(result['solutions'])} solutions pass the residual test")
     for motion in result["free_motions"]:
@@ -339,10 +345,15 @@ def format_result(result, pose_format="matrix"):
     for flag in result.get("fixture_flagged", []):
         lines.append(f"fixture: {flag['feature']} departs {flag['departure_mm']:.3f} mm from the drawing "
                      f"({flag['mode']} {flag['deviation']:.4g}), beyond its tolerance")
-    rows = result.get("touch_rows")
     for flag in result["flagged"]:
         where = flag.get("row", f"touch {flag['touch']}")
-        lines.append(f"flagged: {where} on {flag['feature']} ({flag['residual_mm']:.4f} mm off)")
+        fix = f"it fits on {flag['relabel']}" if flag["relabel"] else "the others fit without it"
+        lines.append(f"flagged: {where} on {flag['feature']} ({flag['residual_mm']:.4f} mm off): {fix}")
+    if result["culprit"] is not None:
+        lines.append(f"culprit: {rows[result['culprit']] if rows else 'touch %d' % result['culprit']}")
+    elif result["flagged"]:
+        lines.append(f"{len({f['touch'] for f in result['flagged']})} touches could each explain it: "
+                     "which one is wrong cannot be told (touch again)")
     if result["inadmissible"]:
         named = [rows[i] if rows else f"touch {i}" for i in result["inadmissible"]]
         lines.append("off its patch or touched from inside at this pose: " + ", ".join(named))
@@ -439,6 +450,8 @@ def report(result, pose_format="matrix", as_json=False):
         return format_result(result, pose_format)
     from .controllers import format_pose, sigmas_from_covariance, values_from_pose
 
+    if result["pose"] is None:
+        return json.dumps(dict(result, controller=None), indent=2)
     covariance = result["covariance"]
     # A gimbal lock leaves an Euler angle without a first-order sigma: null in JSON.
     sigmas = None if covariance is None else [

@@ -146,18 +146,18 @@ def test_ball_tip_touches_are_ball_centres():
 
 @pytest.mark.parametrize("name,plan", PLANS)
 def test_errors_match_the_cramer_rao_bound(name, plan):
-    """500 trials at sigma = 5 um: RMS errors within 10 % of the bound, all successful.
+    """500 trials at sigma = 5 um: RMS errors within 10 % of the bound, at most 2 not `unique`.
 
     Every plan, plane and line sensors included: the touches are drawn from the
     engine's sensor noise model, the bound and the estimator use the same one.
-    The residual test rejects a correct pose 1 time in 1000 by design (about 2
-    of the 3500 trials): "all successful" holds for this seed, chosen so, not
-    for every seed.
+    The residual test rejects a correct pose 1 time in 1000 by design (0.5 of
+    500 trials on average; more than 2 in 1.4 % of seeds).
     """
     features, entries = _plan(name, plan)
     rng = np.random.default_rng(2041)
     sigma, trials = 0.005, 500
     err_t, err_r, bound_t, bound_r = [], [], [], []
+    rejected = 0
     for _ in range(trials):
         truth = _random_pose(rng)
         touches, contacts = plan_touches(entries, truth)
@@ -166,7 +166,9 @@ def test_errors_match_the_cramer_rao_bound(name, plan):
             *apply_twist(truth[:3, :3], truth[:3, 3], rng.normal(scale=[0.01] * 3 + [0.5] * 3))
         )
         result = register_touches(features, noisy, nominal, sigma_mm=sigma, contacts=contacts)
-        assert result["status"] == "unique"
+        if result["status"] != "unique":
+            rejected += 1
+            continue
         dt, dr = pose_errors(np.array(result["pose"]), truth)
         err_t.append(dt)
         err_r.append(dr)
@@ -174,6 +176,7 @@ def test_errors_match_the_cramer_rao_bound(name, plan):
         bound = cramer_rao_bound(problem, truth, sigma)
         bound_t.append(np.trace(bound[3:, 3:]))
         bound_r.append(np.trace(bound[:3, :3]))
+    assert rejected <= 2
     ratio_t = np.sqrt(np.mean(np.square(err_t)) / np.mean(bound_t))
     ratio_r = np.sqrt(np.mean(np.square(err_r)) / np.mean(bound_r))
     assert abs(ratio_t - 1.0) < 0.10, ratio_t
@@ -322,7 +325,10 @@ def test_a_touch_labelled_with_the_wrong_feature_is_flagged():
     touches["front"][3] = truth[:3, :3] @ wrong + truth[:3, 3]
     result = register_touches(features, touches)
     assert result["status"] == "inconsistent"
-    assert [(f["feature"], f["touch"]) for f in result["flagged"]] == [("front", 7)]
+    # Left out, the others fit; put on left, where it was taken, it fits too: one culprit.
+    assert [(f["feature"], f["touch"], f["relabel"]) for f in result["flagged"]] == [("front", 7, None),
+                                                                                    ("front", 7, "left")]
+    assert result["culprit"] == 7
     dt, dr = pose_errors(np.array(result["pose"]), truth)
     assert dt < 0.05 and dr < 1e-3
 
