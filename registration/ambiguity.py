@@ -14,7 +14,6 @@ from .touches import point_touches
 from .verdict import Solution, judged, same_pose
 
 SCREEN_STARTS = 4  # candidate poses of the whole set an explanation is looked for from, lowest cost first
-SOLVED_AFRESH = 3  # when that finds none: touches left out and solved from scratch, the robust fit's worst first
 
 
 def explanations(problem, features, solutions, initial_pose=None):
@@ -24,9 +23,9 @@ def explanations(problem, features, solutions, initial_pose=None):
     Each touch is left out in turn and the rest refined from a robust (Cauchy)
     fit of the whole set, which an outlier hardly pulls, from each of its
     ``SCREEN_STARTS`` lowest-cost candidate poses (``solutions``), and from those
-    candidates themselves. When no removal fits, an outlier far off may have
-    pulled every candidate away: the ``SOLVED_AFRESH`` touches the robust fit
-    finds worst are left out and solved from scratch (from ``initial_pose``
+    candidates themselves. When no removal fits from these, an outlier far off
+    may have pulled every candidate (and the robust fits) away: each touch is
+    left out again and the rest solved from scratch (from ``initial_pose``
     when given). A point or ball touch whose removal explains it is also put
     on every other feature, refined from the poses its removal leads to (a
     label that fits implies a removal that does). Returns
@@ -39,9 +38,7 @@ def explanations(problem, features, solutions, initial_pose=None):
     touches = list(dict.fromkeys(int(k) for k in problem.row_touch))
     left_out = {touch: _fits_from(problem.without(touch), robust + candidates) for touch in touches}
     if not any(left_out.values()):
-        r = problem.evaluate(*robust[0])[0]
-        worst = sorted(touches, key=lambda k: -float(np.sum(r[problem.row_touch == k] ** 2)))
-        left_out = {touch: _fits(problem.without(touch), initial_pose) for touch in worst[:SOLVED_AFRESH]}
+        left_out = {touch: _fits(problem.without(touch), initial_pose) for touch in touches}
     found = []
     for touch, fits in left_out.items():
         tries = [(None, fits)]
