@@ -21,9 +21,9 @@ def explanations(problem, features, solutions, initial_pose=None):
     touches that an admissible pose fits, with the poses it leads to.
 
     Each touch is left out in turn and the rest refined from a robust (Cauchy)
-    fit of the whole set, which an outlier hardly pulls, from each of its
-    ``SCREEN_STARTS`` lowest-cost candidate poses (``solutions``), and from those
-    candidates themselves. When no removal fits from these, an outlier far off
+    fit of the whole set from its best candidate pose, which an outlier hardly
+    pulls, and from the ``SCREEN_STARTS`` lowest-cost candidate poses
+    (``solutions``). When no removal fits from these, an outlier far off
     may have pulled every candidate (and the robust fits) away: each touch is
     left out again and the rest solved from scratch (from ``initial_pose``
     when given). A point or ball touch whose removal explains it is also put
@@ -34,9 +34,12 @@ def explanations(problem, features, solutions, initial_pose=None):
     distance mm from its labelled feature at that pose)].
     """
     candidates = [(s.rotation, s.translation) for s in solutions[:SCREEN_STARTS]]
-    robust = [_robust_pose(problem, R, t) for R, t in candidates]
+    starts = []
+    for pose in [_robust_pose(problem, *candidates[0])] + candidates:
+        if not any(same_pose(pose, known) for known in starts):
+            starts.append(pose)
     touches = list(dict.fromkeys(int(k) for k in problem.row_touch))
-    left_out = {touch: _fits_from(problem.without(touch), robust + candidates) for touch in touches}
+    left_out = {touch: _fits_from(problem.without(touch), starts) for touch in touches}
     if not any(left_out.values()):
         left_out = {touch: _fits(problem.without(touch), initial_pose) for touch in touches}
     found = []
