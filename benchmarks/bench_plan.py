@@ -1,9 +1,9 @@
-"""`fixturecad plan` against the default plans and the best of 20,000 random plans, and its time.
+"""`fixturecad plan` against the templates' minimal plans and the best of 20,000 random plans, and its time.
 
 Run by hand: ``python benchmarks/bench_plan.py``. For every template: the D-optimal plan of as many
-point-probe touches as the default plan makes, the best (by the same criterion) of 20,000 seeded random
-plans of that count on the same candidates (the patches 1 mm in, reachable), and the default plan; the
-Cramer-Rao bound of each per um of touch noise (translation um, rotation mdeg). Then the median time of
+point-probe touches as the minimal plan makes (the default plan where there is no ``minimal``), the best
+(by the same criterion) of 20,000 seeded random plans of that count on the same candidates (the patches
+1 mm in, reachable), and that plan; the Cramer-Rao bound of each per um of touch noise (translation um, rotation mdeg). Then the median time of
 `fixturecad plan --touches 12`, the whole command.
 """
 
@@ -41,7 +41,7 @@ def bound(rows):
 
 def main():
     print(describe())
-    print("| template | touches | planned: um, mdeg | best of 20,000 random: um, mdeg | default: um, mdeg | plan time, 12 touches |")
+    print("| template | touches | planned: um, mdeg | best of 20,000 random: um, mdeg | minimal: um, mdeg | plan time, 12 touches |")
     print("|---|---|---|---|---|---|")
     rng = np.random.default_rng(2026)
     with tempfile.TemporaryDirectory() as root:
@@ -52,15 +52,15 @@ def main():
             mesh = load_mesh(folder / "fixture.stl")
             ids = [fid for fid, f in features.items() if f.kind in ("plane", "sphere", "cylinder")]
             cands = planning.candidates(features, ids, 1.0, keep=lambda p, n: planning.reachable(mesh.triangles, p, n))
-            default = document["plans"]["default"]["touch_plan"]
-            count = max(6, sum(len(e["points"]) for e in default))
+            minimal = document["plans"].get("minimal", document["plans"]["default"])["touch_plan"]
+            count = max(6, sum(len(e["points"]) for e in minimal))
             chosen = planning.design(cands, count, "d")
             scale = np.r_[np.full(3, 1.0 / cands.length_mm), np.ones(3)]
             picks = np.array([rng.choice(len(cands.rows), count, replace=False) for _ in range(RANDOM_PLANS)])
             rows = cands.rows[picks] * scale
             values = planning.criterion_values(np.einsum("kni,knj->kij", rows, rows), "d")
             best = picks[int(np.argmax(values))]
-            touches, contacts = plan_touches(default, np.eye(4))
+            touches, contacts = plan_touches(minimal, np.eye(4))
             _, J = Problem(build_groups(features, touches, 0.0, contacts), SIGMA_MM).evaluate(np.eye(3), np.zeros(3))
             times = []
             for _ in range(5):

@@ -24,7 +24,7 @@ def explanations(problem, features, solutions, initial_pose=None):
     fit of the whole set from its best candidate pose, which an outlier hardly
     pulls, and from the ``SCREEN_STARTS`` lowest-cost candidate poses
     (``solutions``). When no removal fits from these, an outlier far off
-    may have pulled every candidate (and the robust fits) away: each touch is
+    may have pulled every candidate (and the robust fit) away: each touch is
     left out again and the rest solved from scratch (from ``initial_pose``
     when given). A point or ball touch whose removal explains it is also put
     on every other feature, refined from the poses its removal leads to (a

@@ -65,7 +65,7 @@ def test_planned_touches_lie_on_their_patches_are_reachable_and_locate(folder, n
     assert sim.returncode == 0 and "(designed)" in sim.stdout and "unique 5" in sim.stdout, sim.stdout + sim.stderr
 
 
-@pytest.mark.parametrize("name, count", [("cube", 6), ("v-block", 6)])
+@pytest.mark.parametrize("name, count", [("cube", 12), ("v-block", 12)])
 def test_the_design_beats_the_default_plan_and_random_plans(built, folder, name, count):
     """Same count as the default (point-probe) plan, same candidates: the criterion and both bounds."""
     features = features_from_json(json.loads((built(name) / "features.json").read_text()))
