@@ -10,9 +10,10 @@ inclined face; the inclined face is an ellipse. The ``minimal`` plan
 (class {S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}): three P/F-PL/M on ``plane``, three
 P/F-C/M on ``cylinder``, plus a fourth cylinder touch that removes the finite
 set of solutions (Section V-B); the default plan touches the plane six times
-and the cylinder seven, so that the touches check each other. At a = 90 deg the plane cannot fix the
-rotation about the axis, and near 0 deg the face runs off to infinity: the
-angle is limited to 10..80 deg. The base hangs from the flat bottom face.
+and the cylinder eight, so that the touches check each other. At a = 90 deg
+the plane cannot fix the rotation about the axis, and near 0 deg the face
+runs off to infinity: the angle is limited to 10..80 deg. The base hangs from
+the flat bottom face.
 """
 
 import math
@@ -96,8 +97,8 @@ class InclinedPlaneCylinder(Template):
         r = self.radius
         angles = np.radians([90.0, 210.0, 330.0, 45.0, 135.0, 270.0])
         plane_points = self._on_plane(0.6 * r * np.column_stack([np.cos(angles), np.sin(angles)]))
-        cylinder_points = self._on_cylinder([20.0, 140.0, 260.0, 200.0, 80.0, 320.0, 0.0],
-                                            [0.3, 0.6, 0.4, 0.8, 0.9, 0.1, 0.6])
+        cylinder_points = self._on_cylinder([20.0, 140.0, 260.0, 200.0, 80.0, 320.0, 0.0, 120.0],
+                                            [0.3, 0.6, 0.4, 0.8, 0.9, 0.1, 0.6, 0.95])
 
         def plan(plane_count, cylinder_count):
             return [touch("P/F-PL/M", "plane", plane_points[:plane_count]),
@@ -106,8 +107,8 @@ class InclinedPlaneCylinder(Template):
         return {
             # The plane alone holds the origin along the axis and the turn about it: touches at six distinct
             # heights across the axis, so that any five still check each other (docs/plans.md).
-            "default": Plan(self.contact_class, plan(6, 7),
-                            "6 plane + 7 cylinder touches: a single touch off or mislabelled is found and named"),
+            "default": Plan(self.contact_class, plan(6, 8),
+                            "6 plane + 8 cylinder touches: a single touch off or mislabelled is found and named"),
             "minimal": Plan(self.contact_class, plan(3, 4),
                             "3 plane + 3 cylinder touches, and a 4th cylinder touch for a unique solution"),
         }
