@@ -8,7 +8,8 @@ the end face above the groove bottom. Sensing: ``groove_a`` (wall at y > 0),
 ``groove_b`` (wall at y < 0) and ``end`` (x = 0, its rectangle below the
 groove). The ``minimal`` plan: six P/F-PL/M touches, 3 on ``groove_a``, 2 on
 ``groove_b``, 1 on ``end`` (class {S-T2}x6, none checked by the others); the
-default plan touches each face four times. The base hangs from the bottom face.
+default plan touches each wall five times and the end four. The base hangs
+from the bottom face.
 """
 
 import math
@@ -87,10 +88,10 @@ class VBlock(Template):
 
     def touch_plans(self) -> dict:
         s, d = self.size, self.depth
-        # 3-2-1, then more on each face up to four: every touch checked by the others, also with any one left
-        # out (docs/plans.md).
-        wall_a = self._on_wall(+1, s * np.array([0.2, 0.8, 0.5, 0.5]), [0.3, 0.3, 0.7, 0.2])
-        wall_b = self._on_wall(-1, s * np.array([0.2, 0.8, 0.5, 0.5]), [0.5, 0.5, 0.2, 0.8])
+        # 3-2-1, then more: every touch checked by the others, also with any one left out, and a fifth on each
+        # wall near its top, so that an error too small to be found moves no plan point 0.05 mm.
+        wall_a = self._on_wall(+1, s * np.array([0.2, 0.8, 0.5, 0.5, 0.75]), [0.3, 0.3, 0.7, 0.2, 0.9])
+        wall_b = self._on_wall(-1, s * np.array([0.2, 0.8, 0.5, 0.5, 0.25]), [0.5, 0.5, 0.2, 0.8, 0.9])
         end = np.array([[0.0, 0.0, -(d + s) / 2], [0.0, -0.35 * s, -0.9 * s], [0.0, 0.35 * s, -0.9 * s],
                         [0.0, 0.0, -0.45 * s]])
 
@@ -99,7 +100,7 @@ class VBlock(Template):
                     touch("P/F-PL/M", "end", end[:end_count])]
 
         return {
-            "default": Plan(self.contact_class, plan(4, 4, 4), "4-4-4 point-to-plane touches on the groove walls and "
+            "default": Plan(self.contact_class, plan(5, 5, 4), "5-5-4 point-to-plane touches on the groove walls and "
                             "end: a single touch off or mislabelled is found and named"),
             "minimal": Plan(self.contact_class, plan(3, 2, 1),
                             "3-2-1 point-to-plane touches on the groove walls and end: none is checked"),
