@@ -164,6 +164,8 @@ def _covariance_check(name, zone_mm, trials, seed):
             touches.setdefault(entry["feature"], []).extend(meas)
         result = register_touches(features, touches, initial_pose=truth, sigma_mm=0.005, tolerance=tolerance)
         inconsistent += result["status"] == "inconsistent"
+        if result["pose"] is None:  # inconsistent, not explained by one touch: counted outside the ellipsoid
+            continue
         pose = np.array(result["pose"])
         error = np.concatenate([vector_from_rotation(pose[:3, :3] @ truth[:3, :3].T), pose[:3, 3] - truth[:3, 3]])
         inside += error @ np.linalg.solve(np.array(result["covariance"]), error) <= 12.592  # chi2(6), 95 %
