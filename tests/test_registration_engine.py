@@ -144,7 +144,8 @@ def test_ball_tip_touches_are_ball_centres():
 # ------------------------------------------------------------------ Cramer-Rao bound
 
 
-@pytest.mark.parametrize("name,plan", PLANS)
+# The minimal plans are the default plans' first touches: the bound is checked on the plans with more.
+@pytest.mark.parametrize("name,plan", [(name, plan) for name, plan in PLANS if plan != "minimal"])
 def test_errors_match_the_cramer_rao_bound(name, plan):
     """500 trials at sigma = 5 um: RMS errors within 10 % of the bound, at most 1 % not `unique`.
 
