@@ -131,6 +131,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "rows": problem.size,
             "rank": best.rank,
             "redundancy": redundancy(problem, best),
+            "search": "complete" if solutions.complete else "local",
         }
     )
     if plan_next:

@@ -46,6 +46,7 @@ MAX_CELLS = 100000  # cells alive at one level beyond which the search is not co
 REFINE_STEPS = 8  # batched Gauss-Newton steps from every leaf before the leaves are told apart
 REFINED_FACTOR = 4.0  # refined leaves kept: cost within this many times the residual test's threshold ...
 UNCONVERGED_KEPT = 4  # ... and this many more, the best
+TRANSLATION_GRID = 5  # translation starts per axis of the fixture's box, at one rotation
 SAME_LEAF_RAD, SAME_LEAF_MM = 0.01, 0.1  # refined leaves this close are one start
 
 
@@ -60,6 +61,30 @@ def leaf_starts(problem, threshold):
     if leaves is None:
         return None
     return search.refined(*leaves) if len(leaves[0]) else []
+
+
+def translation_starts(problem, rotation, threshold):
+    """Translations [t] at which the touches may pass at one rotation: Gauss-Newton from a grid over the
+    touched features' patch boxes, the distinct ends within ``REFINED_FACTOR`` of ``threshold``. A local
+    search's second look: solutions that share a rotation (Example One's two, along its edge)."""
+    boxes = [patch_box(g.feature) for g in problem.groups]
+    low, high = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+        return []
+    axes = [np.linspace(a, b, TRANSLATION_GRID) for a, b in zip(low, high)]
+    anchors = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    # A fixture point at ``anchor`` is put where the touches' centres are: t = c - R anchor.
+    centre = np.concatenate([g.centre for g in problem.groups]).mean(axis=0)
+    Rs = np.broadcast_to(rotation, (len(anchors), 3, 3))
+    ts = centre - anchors @ rotation.T
+    for _ in range(REFINE_STEPS):
+        r, J = problem.evaluate_batch(Rs, ts)
+        J = J[:, :, 3:]
+        A = J.transpose(0, 2, 1) @ J + 1e-9 * np.eye(3)
+        ts = ts - (Rs @ np.linalg.solve(A, J.transpose(0, 2, 1) @ r[..., None]))[..., 0]
+    cost = np.sum(problem.evaluate_batch(Rs, ts)[0] ** 2, axis=1)
+    kept = _distinct(Rs, ts, cost)
+    return [ts[k] for k in kept if cost[k] <= REFINED_FACTOR * threshold]
 
 
 class RotationSearch:

@@ -10,7 +10,7 @@ from .fits import sphere_centre_candidates
 from .least_squares import levenberg_marquardt
 from .pose import check_fixture2meas, vector_from_rotation
 from .starts import best_starts, initial_poses
-from .search import leaf_starts
+from .search import leaf_starts, translation_starts
 from .verdict import CHI2_CONFIDENCE, SAME_POSE_TRANSLATION_MM, Solution, chi_square_quantile, judged, same_pose
 
 REFINED_WHEN_NONE_PASS = 3  # candidates refined with the part's deviations when none passes as noise
@@ -84,6 +84,15 @@ def _search(problem, initial_pose, batch):
             solutions.append(judged(problem, Solution(R, t, r, J), length))
         if any(s.passes and s.admissible for s in solutions):
             break
+    if not complete:
+        # Poses that share a found pose's rotation: the one search a local search can afford everywhere.
+        threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
+        for found in [s for s in solutions if s.passes and s.admissible]:
+            for t in translation_starts(problem, found.rotation, threshold):
+                known = [(s.rotation, s.translation) for s in solutions]
+                R, t, r, J = levenberg_marquardt(problem, found.rotation, t, known=known)
+                if not any(same_pose((R, t), pose) for pose in known):
+                    solutions.append(judged(problem, Solution(R, t, r, J), length))
     # Closed-form alternatives: a sphere touched three times has two candidate
     # centres; re-seed each solution with the other one.
     point_groups = [g for g in problem.groups if g.points is not None]

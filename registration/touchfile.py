@@ -322,11 +322,18 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
     return result
 
 
+SEARCH_WORDS = {
+    "complete": "search: complete (every pose the touches admit was looked for)",
+    "local": "search: local (near the nominal pose or the closed-form starts only; other poses may fit)",
+}
+
+
 def format_result(result, pose_format="matrix"):
     """A short human-readable report of a registration result, the pose in a controller's convention."""
     from .controllers import format_pose
 
-    lines = [f"status: {result['status']}", f"rms residual: {result['rms_residual_mm']:.6f} mm"]
+    lines = [f"status: {result['status']}", SEARCH_WORDS[result["search"]],
+             f"rms residual: {result['rms_residual_mm']:.6f} mm"]
     if result["sigma_translation_mm"] is not None:
         lines.append(
             f"sigma: {result['sigma_translation_mm']:.6f} mm, {result['sigma_rotation_deg']:.6f} deg"

@@ -471,8 +471,6 @@ def test_the_chi_square_quantile_is_scipys():
             assert chi_square_quantile(probability, dof) == pytest.approx(chi2.ppf(probability, dof), rel=1e-10)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12 (open): the start-based search misses Example One's second "
-                                       "solution, 47.81 mm along the edge, and says unique (the plan's note says so)")
 def test_the_paper_example_one_has_two_solutions_along_the_edge():
     """The paper's Example One: the sphere touch leaves two exact, admissible poses along the edge."""
     from fixturecad.build import features_document
