@@ -7,9 +7,12 @@ point and ball touches' fixture-frame positions as ``x_i = R^T (p_i - c) + y``:
 point or ball touch is a distance of ``x_i`` from its element, so it moves by
 at most ``|x_i - x_i'|`` (1-Lipschitz), and turning ``R`` within a cell of
 geodesic radius ``delta`` (rad) about ``R0`` moves ``x_i`` by at most
-``delta rho_i``, ``rho_i = |p_i - c|``. So a pose of the cell that passes
+``delta rho_i``, ``rho_i = |p_i - c|``; all touches together, one turn
+``E`` of angle ``theta``, by ``sum |(E - I) b_i|^2 <= theta^2 lambda``,
+``lambda`` the largest eigenvalue of the touches' inertia tensor about ``c``
+(``sum |b|^2 I - b b^T``). So a pose of the cell that passes
 has, at ``R0`` and the same ``y``, a cost of at most
-``B = (sqrt(T) + delta |rho|)^2``: a cell whose least cost over ``y`` at
+``B = (sqrt(T) + delta sqrt(lambda))^2``: a cell whose least cost over ``y`` at
 ``R0`` exceeds ``B`` holds no pose that passes and is dropped. So is a cell
 where no ``y`` brings every touch within ``sqrt(T)`` plus the admissibility
 slack (:mod:`.verdict`) plus ``delta rho_i`` of its patch's box
@@ -97,7 +100,10 @@ class RotationSearch:
             return
         self.points = np.concatenate([g.points for g in groups])
         self.centroid = self.points.mean(axis=0)
-        self.rho = np.linalg.norm(self.points - self.centroid, axis=1)
+        b = self.points - self.centroid
+        self.rho = np.linalg.norm(b, axis=1)
+        # How far one radian of turn moves the touches, all together (the module doc's sqrt(lambda)).
+        self.swing_mm = float(np.sqrt(np.linalg.eigvalsh(np.sum(self.rho**2) * np.eye(3) - b.T @ b)[-1]))
         self.root = float(np.sqrt(threshold))
         # Each touch's element: its core, and how far off the core the touch lies at contact (a ball's
         # centre by both radii, as its ``rho``; a point probe by the feature's radius; a ball on a point by
@@ -135,7 +141,7 @@ class RotationSearch:
             fits = self.fits_patches(a, delta)
             v, Rs, a = v[fits], Rs[fits], a[fits]
             ys, cost = self.best_images(a, Rs)
-            keep = cost <= (self.root + delta * np.linalg.norm(self.rho)) ** 2
+            keep = cost <= (self.root + delta * self.swing_mm) ** 2
             v, Rs, ys = v[keep], Rs[keep], ys[keep]
             if delta <= LEAF_RAD or not len(v):
                 return Rs, self.centroid - (Rs @ ys[..., None])[..., 0]

@@ -84,7 +84,7 @@ def _search(problem, initial_pose, batch):
             solutions.append(judged(problem, Solution(R, t, r, J), length))
         if any(s.passes and s.admissible for s in solutions):
             break
-    if not complete:
+    if not complete and initial_pose is None:
         # Poses that share a found pose's rotation: the one search a local search can afford everywhere.
         threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
         for found in [s for s in solutions if s.passes and s.admissible]:
