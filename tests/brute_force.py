@@ -33,6 +33,7 @@ STARTS = 150
 STEP = 1e-6  # central-difference step of the Jacobian, rad and mm
 DESCENT_ITERATIONS = 300  # batched damped steps taking every start to its minimum before least_squares
 CONVERGED_DAMPING = 1e8  # a start whose steps were refused until its damping grew this large is at a minimum
+MIN_DAMPING = 1e-9  # relative to the diagonal: keeps a rank-deficient step solvable
 EXACT_COST_MM2 = 1e-26  # ... as is one that fits this well
 REFINE_EVALUATIONS = 100  # least_squares evaluations from a start the descent left in a slow valley
 PAD_LEVER_MM = 20.0  # a plane sensor's tilt (rad) is seen at this distance from its point, as mm
@@ -179,7 +180,9 @@ class TouchResiduals:
         for _ in range(iterations):
             H = J.transpose(0, 2, 1) @ J
             g = np.einsum("kmi,km->ki", J, r)
-            diagonal = np.einsum("kii->ki", H) + 1e-12
+            # Marquardt's scaling, floored so that a parameter the residuals do not see stays solvable.
+            diagonal = np.einsum("kii->ki", H)
+            diagonal = np.maximum(diagonal, 1e-12 * diagonal.max(axis=1, keepdims=True) + 1e-18)
             lm = H + damping[active, None, None] * diagonal[:, :, None] * np.eye(6)
             step = -np.linalg.solve(lm, g[..., None])[..., 0]
             A_try, b_try = rotations(step[:, :3]) @ A[active], b[active] + step[:, 3:]
@@ -187,7 +190,7 @@ class TouchResiduals:
             cost_try = np.einsum("km,km->k", r_try, r_try)
             better = cost_try < cost[active]
             A[active[better]], b[active[better]], cost[active[better]] = A_try[better], b_try[better], cost_try[better]
-            damping[active] = np.where(better, damping[active] / 3.0, damping[active] * 4.0)
+            damping[active] = np.where(better, np.maximum(damping[active] / 3.0, MIN_DAMPING), damping[active] * 4.0)
             active = active[(damping[active] < CONVERGED_DAMPING) & (cost[active] > EXACT_COST_MM2)]
             if not len(active):
                 break
