@@ -6,7 +6,8 @@ level, one row: layouts; the engine's answers by status; its failures (a wrong `
 with another admissible pose, ``unique`` with none, ``ambiguous`` missing an admissible pose, a false
 ``inconsistent``, a separating touch off the part or not separating); the median and largest time of
 one register_touches call without and with a nominal pose (5 deg, 5 mm off), and of the brute force.
-One run each, one process: times are of this machine.
+Times are the CPU time of the process (``time.process_time``, one thread: run with OMP_NUM_THREADS=1),
+which other load on a shared machine does not inflate; one run each.
 """
 
 import argparse
@@ -56,7 +57,7 @@ def main():
     for case, noise_mm in VARIANTS:
         name = variant_id(case, noise_mm)
         if args.case in name:
-            print("| " + " | ".join(row(name, judge_all(case, noise_mm, args.layouts))) + " |", flush=True)
+            print("| " + " | ".join(row(name, judge_all(case, noise_mm, args.layouts, timed=True))) + " |", flush=True)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,11 @@ Independent of the engine on purpose: its pose parametrisation, residuals, start
 
 Many seeded random starts (rotation uniform on SO(3), the touches' centroid mapped to a uniform point
 of the fixture's bounding box), and the true pose when it is known, are each refined to a local
-minimum of the touches' residuals. A pose is kept when it passes: every touch lies within
+minimum of the touches' residuals: all together by a batched Levenberg-Marquardt descent (cheap), then
+each by its own ``least_squares``, except a start whose descent converged to a minimum that does not
+pass or reached a pose already refined. With noisy touches, a minimum that passes off the patches is
+pulled onto them (its touches' distances beyond the patches as more rows), since poses near it may pass
+on them. A pose is kept when it passes: every touch lies within
 ``PATCH_TOLERANCE_MM`` of its feature's finite patch, and the residuals are noise-free (RMS below
 ``EXACT_RMS_MM``) or pass a chi-square test at the touch noise sigma. Kept poses closer than
 ``SAME_ROTATION_RAD`` and ``SAME_TRANSLATION_MM`` are one.
@@ -33,10 +37,12 @@ STARTS = 150
 STEP = 1e-6  # central-difference step of the Jacobian, rad and mm
 DESCENT_ITERATIONS = 300  # batched damped steps taking every start to its minimum before least_squares
 CONVERGED_DAMPING = 1e8  # a start whose steps were refused until its damping grew this large is at a minimum
-MIN_DAMPING = 1e-9  # relative to the diagonal: keeps a rank-deficient step solvable
 EXACT_COST_MM2 = 1e-26  # ... as is one that fits this well
+MIN_DAMPING = 1e-9  # relative to the diagonal: keeps a rank-deficient step solvable
 REFINE_EVALUATIONS = 100  # least_squares evaluations from a start the descent left in a slow valley
 PAD_LEVER_MM = 20.0  # a plane sensor's tilt (rad) is seen at this distance from its point, as mm
+INSIDE_TARGET_MM = 0.1  # a pose pulled onto the patches aims at touches at most this far outside ...
+INSIDE_WEIGHT = 10.0  # ... their distance beyond it weighted this much more than a residual
 
 
 @dataclass
@@ -95,10 +101,10 @@ class TouchResiduals:
             feature, sensor = features[contact["feature"]], contact["sensor"]
             if sensor["kind"] == "plane" and feature.kind == "plane":
                 sensors.append(("plane", feature, np.asarray(sensor["point"], float),
-                                      np.asarray(sensor["normal"], float) / np.linalg.norm(sensor["normal"])))
+                                np.asarray(sensor["normal"], float) / np.linalg.norm(sensor["normal"])))
             elif sensor["kind"] == "line" and feature.kind == "line":
                 sensors.append(("line", feature, np.asarray(sensor["point"], float),
-                                      np.asarray(sensor["direction"], float) / np.linalg.norm(sensor["direction"])))
+                                np.asarray(sensor["direction"], float) / np.linalg.norm(sensor["direction"])))
             else:
                 raise ValueError(f"no brute-force model of a {sensor['kind']} sensor on a {feature.kind}")
         self.centroid_mm = np.vstack([p for _, p in groups] + [c[2] for c in sensors]).mean(0)
@@ -117,9 +123,12 @@ class TouchResiduals:
         R, t = fixture2meas[:3, :3], fixture2meas[:3, 3]
         return R.T, R.T @ (self.centroid_mm - t)
 
-    def rows(self, A, b):
-        """Residuals (k, size) at k poses, A (k, 3, 3), b (k, 3)."""
+    def rows(self, A, b, inside=False):
+        """Residuals (k, size) at k poses, A (k, 3, 3), b (k, 3); ``inside``: and the point touches'
+        distances beyond their patches, less ``INSIDE_TARGET_MM``, weighted ``INSIDE_WEIGHT`` (k, touches)."""
         k, out = len(A), []
+        if inside:
+            out.append(INSIDE_WEIGHT * np.maximum(self.outside_mm(A, b) - INSIDE_TARGET_MM, 0.0))
         for feature, P in self.groups:
             q = np.einsum("kij,nj->kni", A, P) + b[:, None]
             out.append(feature.signed_distance(q.reshape(-1, 3)).reshape(k, len(P)))
@@ -148,7 +157,18 @@ class TouchResiduals:
             out.append((feature, s_fix[None]))
         return out
 
+    def outside_mm(self, A, b):
+        """How far (k, touches) mm beyond its feature's patch each point touch lies at k poses (0 inside)."""
+        k, out = len(A), []
+        for feature, P in self.groups:
+            q = feature.closest_point((np.einsum("kij,nj->kni", A, P) + b[:, None]).reshape(-1, 3))
+            core, anchor, direction, _ = feature.core()
+            along = (q - anchor) @ direction if core == "line" else None
+            out.append(np.maximum(-feature.extent.margin(q, along), 0.0).reshape(k, len(P)))
+        return np.hstack(out)
+
     def admissible(self, A, b, tolerance_mm=PATCH_TOLERANCE_MM):
+        """Whether every touch and contact location lies on its feature's patch at the pose (A, b)."""
         return all(np.all(feature.contains(points, tolerance_mm)) for feature, points in self.contact_points(A, b))
 
     def passing_cost_mm2(self, sigma_mm):
@@ -158,23 +178,23 @@ class TouchResiduals:
         # A set without redundancy fits exactly: one degree of freedom tolerates the solver's residue.
         return sigma_mm**2 * chi2.ppf(CONFIDENCE, max(self.size - 6, 1))
 
-    def jacobians(self, A, b):
-        """Residuals (k, size) and their Jacobians (k, size, 6) over (w, b) at ``A = exp(w) A``, by
-        central differences, all k poses in one evaluation."""
+    def jacobians(self, A, b, inside=False):
+        """Residuals (k, rows) and their Jacobians (k, rows, 6) over (w, b) at ``A = exp(w) A``, by
+        central differences, all k poses in one evaluation (``inside``: see :meth:`rows`)."""
         steps = STEP * np.vstack([np.eye(6), -np.eye(6)])
         k = len(A)
         moved_A = (rotations(np.tile(steps[:, :3], (k, 1))).reshape(k, 12, 3, 3) @ A[:, None]).reshape(-1, 3, 3)
         moved_b = (b[:, None] + steps[:, 3:]).reshape(-1, 3)
-        values = self.rows(moved_A, moved_b).reshape(k, 12, -1)
-        return self.rows(A, b), ((values[:, :6] - values[:, 6:]) / (2.0 * STEP)).transpose(0, 2, 1)
+        values = self.rows(moved_A, moved_b, inside).reshape(k, 12, -1)
+        return self.rows(A, b, inside), ((values[:, :6] - values[:, 6:]) / (2.0 * STEP)).transpose(0, 2, 1)
 
-    def descend(self, A, b, iterations=DESCENT_ITERATIONS):
+    def descend(self, A, b, inside=False, iterations=DESCENT_ITERATIONS):
         """Levenberg-Marquardt on k starts at once (A (k, 3, 3), b (k, 3)), each with its own damping:
-        brings every start to, or near, its local minimum cheaply before :meth:`refine`. Returns the
-        poses, their costs (mm^2) and whether each has converged (no step lowers its cost)."""
+        brings every start to, or near, its local minimum cheaply before :meth:`refine` (``inside``: see
+        :meth:`rows`). Returns the poses and whether each has converged (no step lowers its cost)."""
         A, b = A.copy(), b.copy()
         damping = np.full(len(A), 1e-3)
-        r, J = self.jacobians(A, b)
+        r, J = self.jacobians(A, b, inside)
         cost = np.einsum("km,km->k", r, r)
         active = np.arange(len(A))
         for _ in range(iterations):
@@ -186,7 +206,7 @@ class TouchResiduals:
             lm = H + damping[active, None, None] * diagonal[:, :, None] * np.eye(6)
             step = -np.linalg.solve(lm, g[..., None])[..., 0]
             A_try, b_try = rotations(step[:, :3]) @ A[active], b[active] + step[:, 3:]
-            r_try = self.rows(A_try, b_try)
+            r_try = self.rows(A_try, b_try, inside)
             cost_try = np.einsum("km,km->k", r_try, r_try)
             better = cost_try < cost[active]
             A[active[better]], b[active[better]], cost[active[better]] = A_try[better], b_try[better], cost_try[better]
@@ -194,28 +214,33 @@ class TouchResiduals:
             active = active[(damping[active] < CONVERGED_DAMPING) & (cost[active] > EXACT_COST_MM2)]
             if not len(active):
                 break
-            r, J = self.jacobians(A[active], b[active])
+            r, J = self.jacobians(A[active], b[active], inside)
         converged = np.ones(len(A), bool)
         converged[active] = False
-        return A, b, cost, converged
+        return A, b, converged
 
-    def refine(self, A0, b0):
-        """The local minimum (A, b, residuals) from a start: ``A = exp(w) A0``, least squares over (w, b)."""
+    def refine(self, A0, b0, inside=False):
+        """The local minimum (A, b, residuals) from a start: ``A = exp(w) A0``, least squares over (w, b).
+
+        ``inside``: with the rows of the point touches' distances beyond their patches (:meth:`rows`): the
+        pose near the start that the patches admit, where the least-squares pose is off them but poses on
+        them may pass too (noisy, poorly determined touches).
+        """
         def pose(x):
             return rotations(x[None, :3])[0] @ A0, x[3:]
 
         def fun(x):
             A, b = pose(x)
-            return self.rows(A[None], b[None])[0]
+            return self.rows(A[None], b[None], inside)[0]
 
         def jac(x):
             A, b = pose(x)
-            return self.jacobians(A[None], b[None])[1][0]
+            return self.jacobians(A[None], b[None], inside)[1][0]
 
         fit = least_squares(fun, np.concatenate([np.zeros(3), b0]), jac=jac, method="lm", x_scale="jac",
                             xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=REFINE_EVALUATIONS)
         A, b = pose(fit.x)
-        return A, b, fit.fun
+        return A, b, self.rows(A[None], b[None])[0]
 
 
 def same(a, b):
@@ -246,28 +271,40 @@ def admissible_poses(features, touches, contacts=(), sigma_mm=0.0, truth=None, s
     if truth is not None:
         A, b = problem.pose_of(np.asarray(truth, float))
         A0, b0 = np.vstack([A0, A[None]]), np.vstack([b0, b])
-    A0, b0, cost, converged = problem.descend(A0, b0)
     passing = problem.passing_cost_mm2(sigma_mm)
-    # Each start's own least_squares, skipping one whose descent converged to a minimum that does not pass
-    # or reached a refined pose.
-    kept, refined = [], []
-    for k in np.argsort(cost):
-        if converged[k] and cost[k] > passing:
-            continue
-        start = problem.fixture2meas(A0[k], b0[k])
-        if any(same(start, T) for T in refined):
-            continue
-        A, b, r = problem.refine(A0[k], b0[k])
-        refined.append(problem.fixture2meas(A, b))
-        cost_mm2 = float(r @ r)
-        if cost_mm2 <= passing and problem.admissible(A, b):
-            kept.append(Pose(refined[-1], float(np.sqrt(cost_mm2 / len(r))), cost_mm2))
+    minima = _minima(problem, A0, b0, passing)
+    # Where a passing pose is off the patches, noisy touches may pass at a pose near it on the patches:
+    # pulled onto them. (Noise-free, a pose passes only where it is exact: no other pose near it does.)
+    off = [(A, b) for A, b, r in minima if r @ r <= passing and not problem.admissible(A, b)]
+    if off and problem.groups and sigma_mm > 0.0:
+        minima += _minima(problem, np.array([A for A, _ in off]), np.array([b for _, b in off]), passing, inside=True)
+    kept = [Pose(problem.fixture2meas(A, b), float(np.sqrt(r @ r / len(r))), float(r @ r))
+            for A, b, r in minima if r @ r <= passing and problem.admissible(A, b)]
     kept.sort(key=lambda p: p.cost_mm2)
     distinct = []
     for pose in kept:
         if not any(same(pose.fixture2meas, other.fixture2meas) for other in distinct):
             distinct.append(pose)
     return distinct
+
+
+def _minima(problem, A0, b0, passing, inside=False):
+    """(A, b, residuals) of the local minima from starts (A0, b0): the batched descent, then each start's
+    own least_squares, except a start whose descent converged to a minimum that does not pass or reached
+    a pose already refined (``inside``: see :meth:`TouchResiduals.rows`)."""
+    A0, b0, converged = problem.descend(A0, b0, inside)
+    r = problem.rows(A0, b0)
+    cost = np.einsum("km,km->k", r, r)
+    out, refined = [], []
+    for k in np.argsort(cost):
+        if converged[k] and cost[k] > passing:
+            continue
+        start = problem.fixture2meas(A0[k], b0[k])
+        if any(same(start, T) for T in refined):
+            continue
+        out.append(problem.refine(A0[k], b0[k], inside))
+        refined.append(problem.fixture2meas(*out[-1][:2]))
+    return out
 
 
 def _perpendiculars(normal):

@@ -13,7 +13,7 @@ import pytest
 
 from search_cases import VARIANTS, judge_all, variant_id
 
-LAYOUTS = 3  # per variant in the normal suite; the benchmark runs many more
+LAYOUTS = 4  # per variant in the normal suite; the benchmark runs many more
 
 
 @lru_cache(maxsize=None)
@@ -37,15 +37,18 @@ def _failed(index, *checks):
 
 
 @pytest.mark.parametrize("index", _variants({
-    "inclined-plane-cylinder 2+4, noise-free": "unique with a wrong pose (layout 1: five admissible exact poses)",
+    "v-block 2-2-2, noise-free": "unique with a wrong pose (layout 3)",
+    "inclined-plane-cylinder 2+4, noise-free": "unique with a wrong pose (layout 1)",
 }))
 def test_no_unique_with_a_wrong_pose(index):
     assert _failed(index, "wrong_unique") == []
 
 
 @pytest.mark.parametrize("index", _variants({
-    "inclined-plane-cylinder 2+4, noise-free": "ambiguous missing an admissible pose (layout 0), unique with four "
-                                               "more (layout 1)",
+    "cube 2-2-2, noise-free": "unique with a second admissible exact pose (layout 3)",
+    "v-block 2-2-2, noise-free": "unique with a second admissible exact pose (layout 3)",
+    "inclined-plane-cylinder 2+4, noise-free": "ambiguous missing one of four admissible poses (layout 0), unique "
+                                               "with five (layout 1)",
 }))
 def test_no_admissible_solution_is_missed(index):
     """unique only when the brute force finds exactly one admissible pose; ambiguous lists all of them."""
@@ -54,13 +57,14 @@ def test_no_admissible_solution_is_missed(index):
 
 @pytest.mark.parametrize("index", _variants({
     "inclined-plane-cylinder 2+4, 5 um": "inconsistent although an admissible pose passes (layout 0)",
+    "collinear 4-3-2 cube, 5 um": "inconsistent although an admissible pose passes (layout 3)",
 }))
 def test_inconsistent_only_when_no_admissible_pose_passes(index):
     assert _failed(index, "false_inconsistent") == []
 
 
 @pytest.mark.parametrize("index", _variants({
-    "near-degenerate 3-2-1 cube, 5 um": "the separating touch lies off the real part (layouts 1, 2)",
+    "near-degenerate 3-2-1 cube, 5 um": "the separating touch lies off the real part (layouts 1, 2, 3)",
 }))
 def test_separating_touches_lie_on_the_part_and_separate(index):
     assert [(k, o.separating) for k, o in enumerate(outcomes(index)) if o.separating not in ("", "separates")] == []
