@@ -44,7 +44,8 @@ def test_never_a_confident_wrong_pose(case, noise_mm):
     ambiguous listing all of them; inconsistent only when it finds none; a separating touch on the real
     part that, added, gives the true pose. Failures as {check: [(layout, status, poses found)]}."""
     outcomes = judge_all(case, noise_mm, LAYOUTS)
-    failures = {check: [(k, o.status, o.found) for k, o in enumerate(outcomes) if any(getattr(o, a) for a in attributes)]
+    failures = {check: [(k, o.status, o.found) for k, o in enumerate(outcomes)
+                        if any(getattr(o, attribute) for attribute in attributes)]
                 for check, attributes in CHECKS.items()}
     failures["separating touch"] = [(k, o.separating) for k, o in enumerate(outcomes)
                                     if o.separating not in ("", "separates")]
