@@ -45,7 +45,7 @@ from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_RAD = 0.045  # cells are split down to this radius (rad), then refined
 TRANSLATION_STEPS = 3  # Gauss-Newton steps for the best translation of a cell
-MAX_CELLS = 100000  # cells alive at one level beyond which the search is not completed
+MAX_CELLS = 250000  # cells alive at one level beyond which the search is not completed
 REFINE_STEPS = 8  # batched Gauss-Newton steps from every leaf before the leaves are told apart
 REFINED_FACTOR = 4.0  # refined leaves kept: cost within this many times the residual test's threshold ...
 UNCONVERGED_KEPT = 4  # ... and this many more, the best
