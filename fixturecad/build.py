@@ -71,6 +71,23 @@ def touch_template_json(template: "Template") -> str:
     return touch_json(*plan_touches(template.touch_plans()["default"].touches, np.eye(4)))
 
 
+def touch_candidates(features, triangles) -> dict:
+    """features.json's ``touch_candidates``: the point-probe touches the planner would consider by default
+    (every surface feature, the default margin) that a probe reaches on the mesh ``triangles`` (m, 3, 3)."""
+    from fixturecad.registration import planning
+    from fixturecad.registration.reach import reachable
+
+    features = {f.id: f for f in features}
+    points = {}
+    for fid in [fid for fid, f in features.items() if f.kind in planning.SURFACES]:
+        try:
+            points.update(planning.candidate_points(features, [fid], planning.DEFAULT_MARGIN_MM,
+                                                    keep=lambda p, n: reachable(triangles, p, n)))
+        except ValueError:
+            pass  # no reachable point that far in: the next touches go to the other features
+    return planning.candidate_record(points, planning.DEFAULT_MARGIN_MM)
+
+
 def default_target(template: "Template", out_root: Path | None = None) -> Path:
     """``out/<template>-<short parameters>`` under the current directory (or ``out_root``)."""
     return (Path("out") if out_root is None else Path(out_root)) / template.slug()
@@ -97,7 +114,7 @@ def build(template: "Template", target: Path, force: bool = False,
 def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture_tolerance: float, side) -> None:
     from fixturecad.cad.brep import match_features
     from fixturecad.cad.export import Named, export
-    from fixturecad.cad.mesh import triangulate
+    from fixturecad.cad.mesh import read_stl, triangulate
     from fixturecad.cad.solid import fixture_solid
     from fixturecad.preview import feature_colours, fixture_scene
 
@@ -112,15 +129,16 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
 
     size = max(shape.BoundingBox().xlen, shape.BoundingBox().ylen, shape.BoundingBox().zlen)
     parts = triangulate(shape, PREVIEW_CHORD_FRACTION * size)
-    document = features_document(template, stl_tolerance, fixture_tolerance)
-    features_json.write(document, folder / FILES["features"])
-    # the side process draws preview.png and writes register.py while we write STEP and STL
-    side.send(("preview", fixture_scene(template, features, matches, parts), folder / FILES["preview"]),
-              ("register", document, folder / FILES["register"]))
+    # the side process draws preview.png while we write STEP and STL
+    side.send(("preview", fixture_scene(template, features, matches, parts), folder / FILES["preview"]))
     colours = feature_colours([feature.id for feature in features])
     named = [Named(f.id, **{("edges" if f.kind == "line" else "faces"): tuple(matches[f.id])}, colour=colours[f.id])
              for f in features if f.kind != "point"]
     export(shape, [folder / FILES[kind] for kind in ("step", "stl", "3mf")], stl_tolerance, template.slug(), named)
+    document = features_document(template, stl_tolerance, fixture_tolerance)
+    document["touch_candidates"] = touch_candidates(features, read_stl(folder / FILES["stl"]))
+    features_json.write(document, folder / FILES["features"])
+    side.send(("register", document, folder / FILES["register"]))
     (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")
     (folder / FILES["touches_json"]).write_text(touch_template_json(template), encoding="utf-8")
     side.wait()

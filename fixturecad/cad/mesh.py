@@ -4,6 +4,8 @@ The chord tolerance is absolute, in mm (cadquery's own ``tessellate`` uses
 a relative one): every triangle lies within ``tolerance`` of the surface.
 """
 
+from pathlib import Path
+
 import numpy as np
 from OCP.BRep import BRep_Tool
 from OCP.BRepMesh import BRepMesh_IncrementalMesh
@@ -106,15 +108,25 @@ def mesh_volume(vertices, faces) -> float:
     return float(np.einsum("ij,ij->i", tris[:, 0], np.cross(tris[:, 1], tris[:, 2])).sum() / 6.0)
 
 
+STL_RECORD = np.dtype([("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
+
+
 def write_stl(path, vertices, faces, name: str = "fixture") -> None:
     """Binary STL, mm, facet normals from the winding."""
     tris = vertices[faces].astype(np.float32)
     normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    record = np.zeros(len(faces), dtype=[("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
+    record = np.zeros(len(faces), dtype=STL_RECORD)
     record["normal"], record["tri"] = normals, tris
     header = f"{name} fixturecad binary STL, units mm".encode()[:80].ljust(80, b" ")
     with open(path, "wb") as handle:
         handle.write(header)
         handle.write(np.uint32(len(faces)).tobytes())
         handle.write(record.tobytes())
+
+
+def read_stl(path) -> np.ndarray:
+    """The triangles (m, 3, 3) mm of a binary STL that :func:`write_stl` wrote."""
+    data = Path(path).read_bytes()
+    count = int(np.frombuffer(data, "<u4", 1, 80)[0])
+    return np.frombuffer(data, STL_RECORD, count, 84)["tri"].astype(np.float64)
