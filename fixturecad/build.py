@@ -114,7 +114,8 @@ def build(template: "Template", target: Path, force: bool = False,
 def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture_tolerance: float, side) -> None:
     from fixturecad.cad.brep import match_features
     from fixturecad.cad.export import Named, export
-    from fixturecad.cad.mesh import read_stl, triangulate
+    from fixturecad.cad.mesh import triangulate
+    from fixturecad.registration.sampling import read_triangles
     from fixturecad.cad.solid import fixture_solid
     from fixturecad.preview import feature_colours, fixture_scene
 
@@ -136,7 +137,7 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
              for f in features if f.kind != "point"]
     export(shape, [folder / FILES[kind] for kind in ("step", "stl", "3mf")], stl_tolerance, template.slug(), named)
     document = features_document(template, stl_tolerance, fixture_tolerance)
-    document["touch_candidates"] = touch_candidates(features, read_stl(folder / FILES["stl"]))
+    document["touch_candidates"] = touch_candidates(features, read_triangles(folder / FILES["stl"]))
     features_json.write(document, folder / FILES["features"])
     side.send(("register", document, folder / FILES["register"]))
     (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")

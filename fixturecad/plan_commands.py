@@ -77,7 +77,7 @@ def plan(
     from fixturecad.registration import planning
     from fixturecad.registration.features import features_from_json
     from fixturecad.registration.reach import reachable
-    from fixturecad.registration.sampling import load_mesh
+    from fixturecad.registration.sampling import read_triangles
     from fixturecad.registration.touchfile import touch_csv
     from fixturecad.staging import check_files, staged_file
     from fixturecad.theory.catalogue import lookup
@@ -103,10 +103,10 @@ def plan(
         raise InputError(f"unknown feature {unknown[0] if unknown else features!r}; features are {', '.join(all_features)}")
     default = default_touches(document, ids, touches) if radius == 0 else None
     try:
-        mesh = load_mesh(out_dir / "fixture.stl", document["volume_mm3"])
+        triangles = read_triangles(out_dir / "fixture.stl", document["volume_mm3"])
         chord = float(document["files"]["stl_tolerance_mm"])
         points = planning.candidate_points(all_features, ids, margin, also=default,
-                                           keep=lambda p, n: reachable(mesh.triangles, p, n, radius, chord))
+                                           keep=lambda p, n: reachable(triangles, p, n, radius, chord))
         candidates = planning.candidates(all_features, points, radius)
         if point is not None and np.linalg.norm(point - candidates.points.mean(0)) > POINT_REACH * candidates.length_mm:
             raise ValueError(f"the point of interest {criterion[6:]} lies {POINT_REACH:g} fixture sizes away: "
@@ -134,8 +134,8 @@ def plan(
         title = f"{document['template']}: plan {name!r}, {touches} touches, criterion {criterion}"
         touched = [{**e, "points": (np.array(e["points"]) + radius * np.array(e["approaches"])).tolist()}
                    for e in entries]  # drawn where the probe touches the surface
-        data = plan_scene(title, np.asarray(mesh.vertices), np.asarray(mesh.faces), list(all_features.values()),
-                          touched, name)
+        data = plan_scene(title, triangles.reshape(-1, 3), np.arange(3 * len(triangles)).reshape(-1, 3),
+                          list(all_features.values()), touched, name)
         with staged_file(folder / f"{name}.png") as path:
             render(data, path)
     typer.echo(_report(document, all_features, candidates, chosen, entries, robust, touches))

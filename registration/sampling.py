@@ -7,6 +7,8 @@ sensors are placed analytically. trimesh is imported here only, never by the
 engine.
 """
 
+from pathlib import Path
+
 import numpy as np
 
 from .defaults import SENSOR_LEVER_MM
@@ -23,21 +25,34 @@ POSE_TRANSLATION_RANGE_MM = 100.0  # random poses: translation uniform in +- thi
 
 
 MESH_VOLUME_TOLERANCE = 0.01  # relative: the tessellation's chords change the volume by far less
+# A binary STL facet: its normal, three vertices (mm) and an attribute word, after an 80-byte header and a count.
+STL_RECORD = np.dtype([("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+def read_triangles(path, volume_mm3=None) -> np.ndarray:
+    """The triangles (m, 3, 3) mm of the fixture's binary STL; ValueError (one line) when it is damaged:
+    not that many facets as its header says, or not enclosing the recorded volume (mm^3)."""
+    try:
+        data = Path(path).read_bytes()
+        count = int(np.frombuffer(data, "<u4", 1, 80)[0])
+        if len(data) != 84 + count * STL_RECORD.itemsize:
+            raise ValueError
+    except (OSError, ValueError):
+        raise ValueError(f"{path} is damaged (not readable as STL): rebuild the fixture") from None
+    triangles = np.frombuffer(data, STL_RECORD, count, 84)["tri"].astype(np.float64)
+    volume = np.einsum("ij,ij->", triangles[:, 0], np.cross(triangles[:, 1], triangles[:, 2])) / 6.0
+    if not count or (volume_mm3 is not None and not abs(volume - volume_mm3) <= MESH_VOLUME_TOLERANCE * volume_mm3):
+        raise ValueError(f"{path} is damaged (not a closed mesh of the fixture's volume): rebuild the fixture")
+    return triangles
 
 
 def load_mesh(path, volume_mm3=None):
-    """The fixture's STL; ValueError (one line) when it does not enclose the recorded volume (mm^3)."""
+    """The fixture's STL as a trimesh mesh (three vertices a triangle, as in the file); ValueError as
+    :func:`read_triangles`."""
     import trimesh
 
-    try:
-        mesh = trimesh.load_mesh(str(path), file_type="stl", process=False)
-    except Exception:  # trimesh raises many kinds on a damaged file
-        raise ValueError(f"{path} is damaged (not readable as STL): rebuild the fixture") from None
-    # A truncated file loses triangles: the enclosed volume tells (the unmerged mesh is never "watertight").
-    if not isinstance(mesh, trimesh.Trimesh) or not len(mesh.faces) or (
-            volume_mm3 is not None and not abs(mesh.volume - volume_mm3) <= MESH_VOLUME_TOLERANCE * volume_mm3):
-        raise ValueError(f"{path} is damaged (not a closed mesh of the fixture's volume): rebuild the fixture")
-    return mesh
+    triangles = read_triangles(path, volume_mm3)
+    return trimesh.Trimesh(triangles.reshape(-1, 3), np.arange(3 * len(triangles)).reshape(-1, 3), process=False)
 
 
 def plan_entries(document, plan="default"):

@@ -4,14 +4,14 @@ The chord tolerance is absolute, in mm (cadquery's own ``tessellate`` uses
 a relative one): every triangle lies within ``tolerance`` of the surface.
 """
 
-from pathlib import Path
-
 import numpy as np
 from OCP.BRep import BRep_Tool
 from OCP.BRepMesh import BRepMesh_IncrementalMesh
 from OCP.BRepTools import BRepTools
 from OCP.TopAbs import TopAbs_REVERSED
 from OCP.TopLoc import TopLoc_Location
+
+from fixturecad.registration.sampling import STL_RECORD
 
 # Largest angle between neighbouring facet normals, rad. The chord tolerance
 # is normally the finer limit; this one only matters on very small radii.
@@ -108,9 +108,6 @@ def mesh_volume(vertices, faces) -> float:
     return float(np.einsum("ij,ij->i", tris[:, 0], np.cross(tris[:, 1], tris[:, 2])).sum() / 6.0)
 
 
-STL_RECORD = np.dtype([("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
-
-
 def write_stl(path, vertices, faces, name: str = "fixture") -> None:
     """Binary STL, mm, facet normals from the winding."""
     tris = vertices[faces].astype(np.float32)
@@ -124,9 +121,3 @@ def write_stl(path, vertices, faces, name: str = "fixture") -> None:
         handle.write(np.uint32(len(faces)).tobytes())
         handle.write(record.tobytes())
 
-
-def read_stl(path) -> np.ndarray:
-    """The triangles (m, 3, 3) mm of a binary STL that :func:`write_stl` wrote."""
-    data = Path(path).read_bytes()
-    count = int(np.frombuffer(data, "<u4", 1, 80)[0])
-    return np.frombuffer(data, STL_RECORD, count, 84)["tri"].astype(np.float64)
