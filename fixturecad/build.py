@@ -45,11 +45,11 @@ def check_fixture_tolerance(value: float) -> float:
 
 
 def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM,
-                      fixture_tolerance: float = DEFAULT_ZONE_MM) -> dict:
-    """The features.json of a build of ``template`` (no CAD needed)."""
+                      fixture_tolerance: float = DEFAULT_ZONE_MM, touch_candidates=None) -> dict:
+    """The features.json of a build of ``template`` (no CAD needed; the build adds its ``touch_candidates``)."""
     files = {"step": FILES["step"], "stl": FILES["stl"], "3mf": FILES["3mf"], "stl_tolerance_mm": stl_tolerance,
              "preview": FILES["preview"]}
-    return features_json.document(template, files, fixture_tolerance)
+    return features_json.document(template, files, fixture_tolerance, touch_candidates)
 
 
 def touch_template(template: "Template") -> str:
@@ -136,8 +136,8 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
     named = [Named(f.id, **{("edges" if f.kind == "line" else "faces"): tuple(matches[f.id])}, colour=colours[f.id])
              for f in features if f.kind != "point"]
     export(shape, [folder / FILES[kind] for kind in ("step", "stl", "3mf")], stl_tolerance, template.slug(), named)
-    document = features_document(template, stl_tolerance, fixture_tolerance)
-    document["touch_candidates"] = touch_candidates(features, read_triangles(folder / FILES["stl"]))
+    document = features_document(template, stl_tolerance, fixture_tolerance,
+                                 touch_candidates(features, read_triangles(folder / FILES["stl"])))
     features_json.write(document, folder / FILES["features"])
     side.send(("register", document, folder / FILES["register"]))
     (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")
