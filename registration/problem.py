@@ -212,5 +212,6 @@ def _subset(group, keep):
     sensor = cut(group.sensor)
     rho = group.rho[keep]
     points = None if group.points is None else group.points[keep]
+    approach = None if group.approach is None else group.approach[keep]
     return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows,
-                      centre=group.centre[keep])
+                      approach, group.centre[keep], group.located)

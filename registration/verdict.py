@@ -108,10 +108,8 @@ def touch_spreads(problem, jacobian):
         return None
     twist_cov = problem.sigma**2 * np.linalg.inv(F)
     spreads = {}
-    for g in problem.groups:
-        if g.points is None:
-            continue
-        for index, point in zip(g.index, g.points):
+    for g in _placed(problem):
+        for index, point in zip(g.index, g.centre):
             # A spatial twist moves the touch's fixture point p by omega x p + v.
             J = np.hstack([-skew(point), np.eye(3)])
             spreads[int(index)] = EXTENT_SIGMAS * np.sqrt(max(np.trace(J @ twist_cov @ J.T), 0.0))
@@ -121,7 +119,8 @@ def touch_spreads(problem, jacobian):
 def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_TOLERANCE_MM):
     """Touch indices that cannot have happened at this pose.
 
-    A touch is inadmissible when its contact, mapped into the fixture frame,
+    A touch is inadmissible when its contact (a probe's point, a ball's
+    centre, a sensor's known contact point), mapped into the fixture frame,
     lies off the feature's finite patch, or when the probe's approach
     direction (if known) points along the outward surface normal there. With
     the touches' ``spreads`` (:func:`touch_spreads`), the patch is widened by
@@ -129,10 +128,8 @@ def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_
     not refused for its own uncertainty.
     """
     bad = set()
-    for g in problem.groups:
-        if g.points is None:
-            continue
-        local = (g.points - translation) @ rotation
+    for g in _placed(problem):
+        local = (g.centre - translation) @ rotation
         slack = tolerance
         if spreads is not None:
             slack = tolerance + np.minimum([spreads[int(i)] for i in g.index], EXTENT_WIDENING_MAX_MM)
@@ -143,6 +140,12 @@ def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_
             away = np.einsum("ij,ij->i", outward, g.approach) > 0.0
             bad.update(int(i) for i in g.index[away & np.all(np.isfinite(g.approach), axis=1)])
     return sorted(bad)
+
+
+def _placed(problem):
+    """The touch groups whose places on the fixture are known: point and ball touches, and sensors whose
+    contact point is given (a pose that puts it off its patch cannot have happened)."""
+    return [g for g in problem.groups if g.points is not None or g.located]
 
 
 def judged(problem, candidate, length):
