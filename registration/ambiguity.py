@@ -10,7 +10,7 @@ from .least_squares import levenberg_marquardt
 from .patches import patch_points
 from .problem import Problem
 from .solve import solve
-from .verdict import EXTENT_TOLERANCE_MM, Solution, judged
+from .verdict import Solution, judged
 
 def robust_flag(problem, solution):
     """A touch whose removal makes the touches consistent, found by a Cauchy-weighted refit.
@@ -75,6 +75,9 @@ def features_beyond_tolerance(problem, solutions, starts=4):
     return sorted(found, key=lambda item: item[3])
 
 
+SEPARATING_MARGIN_MM = 1.0  # a separating touch keeps this far inside its patch's edge under every candidate
+
+
 def separating_touch(features, solutions):
     """The point touch that best tells the best candidate pose from all the others.
 
@@ -82,9 +85,9 @@ def separating_touch(features, solutions):
     where the feature exists on the solid), the touch the best candidate
     predicts (``point_meas_mm``) is scored by how far it would lie off that
     feature under each other candidate; the smallest of these distances is
-    maximised (``separation_mm``). Only points that lie over the patch under
-    every candidate are offered: whichever pose is true, the probe meets the
-    part there.
+    maximised (``separation_mm``). Only points that lie over the patch, at
+    least ``SEPARATING_MARGIN_MM`` inside its edge, under every candidate are
+    offered: whichever pose is true, the probe meets the part there.
     """
     if len(solutions) < 2:
         return None
@@ -97,11 +100,11 @@ def separating_touch(features, solutions):
             continue
         meas = pts @ a.rotation.T + a.translation
         gap = np.full(len(pts), np.inf)
-        over = np.ones(len(pts), bool)
+        over = np.asarray(feature.contains(pts, -SEPARATING_MARGIN_MM))
         for b in others:
             local_b = (meas - b.translation) @ b.rotation
             gap = np.minimum(gap, np.abs(feature.signed_distance(local_b)))
-            over &= np.asarray(feature.contains(local_b, EXTENT_TOLERANCE_MM))
+            over &= np.asarray(feature.contains(local_b, -SEPARATING_MARGIN_MM))
         gap = np.where(over, gap, -np.inf)
         k = int(np.argmax(gap))
         if np.isfinite(gap[k]) and (best is None or gap[k] > best["separation_mm"]):
