@@ -45,11 +45,11 @@ def check_fixture_tolerance(value: float) -> float:
 
 
 def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM,
-                      fixture_tolerance: float = DEFAULT_ZONE_MM) -> dict:
-    """The features.json of a build of ``template`` (no CAD needed)."""
+                      fixture_tolerance: float = DEFAULT_ZONE_MM, touch_candidates=None) -> dict:
+    """The features.json of a build of ``template`` (no CAD needed; the build adds its ``touch_candidates``)."""
     files = {"step": FILES["step"], "stl": FILES["stl"], "3mf": FILES["3mf"], "stl_tolerance_mm": stl_tolerance,
              "preview": FILES["preview"]}
-    return features_json.document(template, files, fixture_tolerance)
+    return features_json.document(template, files, fixture_tolerance, touch_candidates)
 
 
 def touch_template(template: "Template") -> str:
@@ -69,6 +69,23 @@ def touch_template_json(template: "Template") -> str:
     from fixturecad.registration.touchfile import touch_json
 
     return touch_json(*plan_touches(template.touch_plans()["default"].touches, np.eye(4)))
+
+
+def touch_candidates(features, triangles) -> dict:
+    """features.json's ``touch_candidates``: the point-probe touches the planner would consider by default
+    (every surface feature, the default margin) that a probe reaches on the mesh ``triangles`` (m, 3, 3)."""
+    from fixturecad.registration import planning
+    from fixturecad.registration.reach import reachable
+
+    features = {f.id: f for f in features}
+    points = {}
+    for fid in [fid for fid, f in features.items() if f.kind in planning.SURFACES]:
+        try:
+            points.update(planning.candidate_points(features, [fid], planning.DEFAULT_MARGIN_MM,
+                                                    keep=lambda p, n: reachable(triangles, p, n)))
+        except ValueError:
+            pass  # no reachable point that far in: the next touches go to the other features
+    return planning.candidate_record(points, planning.DEFAULT_MARGIN_MM)
 
 
 def default_target(template: "Template", out_root: Path | None = None) -> Path:
@@ -98,6 +115,7 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
     from fixturecad.cad.brep import match_features
     from fixturecad.cad.export import Named, export
     from fixturecad.cad.mesh import triangulate
+    from fixturecad.registration.sampling import read_triangles
     from fixturecad.cad.solid import fixture_solid
     from fixturecad.preview import feature_colours, fixture_scene
 
@@ -112,15 +130,16 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
 
     size = max(shape.BoundingBox().xlen, shape.BoundingBox().ylen, shape.BoundingBox().zlen)
     parts = triangulate(shape, PREVIEW_CHORD_FRACTION * size)
-    document = features_document(template, stl_tolerance, fixture_tolerance)
-    features_json.write(document, folder / FILES["features"])
-    # the side process draws preview.png and writes register.py while we write STEP and STL
-    side.send(("preview", fixture_scene(template, features, matches, parts), folder / FILES["preview"]),
-              ("register", document, folder / FILES["register"]))
+    # the side process draws preview.png while we write STEP and STL
+    side.send(("preview", fixture_scene(template, features, matches, parts), folder / FILES["preview"]))
     colours = feature_colours([feature.id for feature in features])
     named = [Named(f.id, **{("edges" if f.kind == "line" else "faces"): tuple(matches[f.id])}, colour=colours[f.id])
              for f in features if f.kind != "point"]
     export(shape, [folder / FILES[kind] for kind in ("step", "stl", "3mf")], stl_tolerance, template.slug(), named)
+    document = features_document(template, stl_tolerance, fixture_tolerance,
+                                 touch_candidates(features, read_triangles(folder / FILES["stl"])))
+    features_json.write(document, folder / FILES["features"])
+    side.send(("register", document, folder / FILES["register"]))
     (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")
     (folder / FILES["touches_json"]).write_text(touch_template_json(template), encoding="utf-8")
     side.wait()

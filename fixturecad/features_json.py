@@ -38,8 +38,9 @@ def validate(document: dict) -> None:
     validator_for(schema)(schema).validate(document)
 
 
-def document(template, files: dict, fixture_tolerance_mm: float) -> dict:
-    """The features.json content of a template instance (no CAD needed); ``files`` its "files" entry."""
+def document(template, files: dict, fixture_tolerance_mm: float, touch_candidates=None) -> dict:
+    """The features.json content of a template instance (no CAD needed); ``files`` its "files" entry;
+    ``touch_candidates`` the reachable touches a build finds on its mesh (:func:`.build.touch_candidates`)."""
     plans = template.touch_plans()
     return {
         "schema": schema_id(),
@@ -55,6 +56,7 @@ def document(template, files: dict, fixture_tolerance_mm: float) -> dict:
         "files": files,
         "features": [feature.to_json() for feature in template.features()],
         "plans": {name: plan.to_json() for name, plan in plans.items()},
+        **({} if touch_candidates is None else {"touch_candidates": touch_candidates}),
         **template.extras(),
     }
 

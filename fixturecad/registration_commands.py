@@ -197,14 +197,14 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
         twist = np.concatenate([np.radians(1.0) * _unit(rng), 1.0 * _unit(rng)])
         initial = fixture2meas_from_rt(*apply_twist(truth[:3, :3], truth[:3, 3], twist))
     start = time.perf_counter()
-    result = routine.register(touches, initial_pose=initial, sigma_mm=sigma, contacts=contacts, lever_mm=lever,
-                              fixture_tolerance_mm=zone)
+    result = routine.register(touches, initial_pose=initial, sigma_mm=sigma, ball_radius_mm=sampler.ball_radius_mm,
+                              contacts=contacts, lever_mm=lever, fixture_tolerance_mm=zone)
     elapsed = time.perf_counter() - start
     # An inconsistent result with no explanation gives no pose: no error to count.
     err_t, err_r = (np.nan, np.nan) if result["pose"] is None else pose_errors(np.array(result["pose"]), truth)
     # The bound of the noise actually drawn (the routine's sigma also allows for the STL's chords).
     noise_model = noise if noise > 0 else sigma
-    groups = build_groups(sampler.features, touches, 0.0, contacts)
+    groups = build_groups(sampler.features, touches, sampler.ball_radius_mm, contacts)
     bound_t, bound_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever, tolerance), truth, noise_model))
     noise_t, noise_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever), truth, noise_model))
     return {

@@ -33,15 +33,17 @@ class SideProcess:
         )
 
     def send(self, *jobs) -> None:
-        """Run ``(name, *arguments)`` jobs in the child, in order (names given at the start)."""
+        """Run ``(name, *arguments)`` jobs in the child, in order (names given at the start); jobs sent
+        later run after these."""
         for job in jobs:
             if job[0] not in self.names:
                 raise ValueError(f"side job {job[0]!r} was not named at the start")
         self.process.stdin.write(pickle.dumps(jobs))
-        self.process.stdin.close()
+        self.process.stdin.flush()
 
     def wait(self) -> None:
-        """Wait for the child; RuntimeError with its last error line if it failed."""
+        """Wait for the child to finish the jobs sent; RuntimeError with its last error line if it failed."""
+        self.process.stdin.close()
         error = self.process.stderr.read()
         self.process.wait()
         if self.process.returncode != 0:
@@ -75,12 +77,14 @@ def _warm(names) -> None:
 
 def _main() -> None:
     _warm(sys.argv[1:])
-    data = sys.stdin.buffer.read()
-    if not data:
-        return  # the parent gave up
-    for name, *arguments in pickle.loads(data):
-        module, function = JOBS[name]
-        getattr(importlib.import_module(module), function)(*arguments)
+    while True:
+        try:
+            jobs = pickle.load(sys.stdin.buffer)
+        except EOFError:
+            return  # the parent is done, or gave up
+        for name, *arguments in jobs:
+            module, function = JOBS[name]
+            getattr(importlib.import_module(module), function)(*arguments)
 
 
 if __name__ == "__main__":

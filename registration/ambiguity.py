@@ -59,7 +59,8 @@ def explanations(problem, features, solutions, initial_pose=None):
 
 def _fits(problem, initial_pose):
     """Every admissible rank-6 pose passing the residual test, solved from scratch."""
-    return [s for s in solve(problem, initial_pose) if s.passes and s.admissible and s.rank == 6]
+    # The closed-form starts only: a complete search for every touch left out costs seconds.
+    return [s for s in solve(problem, initial_pose, complete=False) if s.passes and s.admissible and s.rank == 6]
 
 
 def _robust_pose(problem, R, t, iterations=5):
@@ -127,6 +128,9 @@ def features_beyond_tolerance(problem, solutions, starts=4):
     return sorted(found, key=lambda item: item[3])
 
 
+SEPARATING_MARGIN_MM = 1.0  # a separating touch keeps this far inside its patch's edge under every candidate
+
+
 def separating_touch(features, solutions):
     """The point touch that best tells the best candidate pose from all the others.
 
@@ -134,7 +138,9 @@ def separating_touch(features, solutions):
     where the feature exists on the solid), the touch the best candidate
     predicts (``point_meas_mm``) is scored by how far it would lie off that
     feature under each other candidate; the smallest of these distances is
-    maximised (``separation_mm``).
+    maximised (``separation_mm``). Only points that lie over the patch, at
+    least ``SEPARATING_MARGIN_MM`` inside its edge, under every candidate are
+    offered: whichever pose is true, the probe meets the part there.
     """
     if len(solutions) < 2:
         return None
@@ -147,11 +153,14 @@ def separating_touch(features, solutions):
             continue
         meas = pts @ a.rotation.T + a.translation
         gap = np.full(len(pts), np.inf)
+        over = np.asarray(feature.contains(pts, -SEPARATING_MARGIN_MM))
         for b in others:
             local_b = (meas - b.translation) @ b.rotation
             gap = np.minimum(gap, np.abs(feature.signed_distance(local_b)))
+            over &= np.asarray(feature.contains(local_b, -SEPARATING_MARGIN_MM))
+        gap = np.where(over, gap, -np.inf)
         k = int(np.argmax(gap))
-        if best is None or gap[k] > best["separation_mm"]:
+        if np.isfinite(gap[k]) and (best is None or gap[k] > best["separation_mm"]):
             best = {
                 "feature": feature.id,
                 "point_fixture_mm": pts[k].tolist(),

@@ -42,7 +42,7 @@ from .verdict import Solution, judged, same_pose
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
                      contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM, tolerance=None, plan_next=False,
-                     target_sigma=None):
+                     target_sigma=None, candidates=None):
     """Register a fixture from labelled touches; return the result dict (see module doc).
 
     Parameters
@@ -63,6 +63,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     target_sigma : (mm, deg) or None, also say in ``target`` whether the pose's standard deviations
         (RMS translation, rotation) meet these and, if not, how many more planned touches are predicted to
         (``more_touches``, None beyond ``MAX_MORE_TOUCHES``)
+    candidates : dict id -> array-like, shape (n, 3), mm, fixture frame, optional: the reachable touches the
+        next touch and the planned touches are chosen among (features.json's ``touch_candidates``,
+        :func:`.planning.stored_candidates`); without them only a separating touch is named
 
     Returns
     -------
@@ -96,6 +99,11 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     if best.rank < 6:
         status = "underdetermined"
         result["free_motions"] = free_motions(problem, best, features)
+    elif len(good) == 1 and good[0].weak:
+        # Too poorly determined to tell on which patch a touch lies: no pose is claimed.
+        status = "underdetermined"
+        best = good[0]
+        result["free_motions"] = free_motions(problem, best, features, weak=True)
     elif len(good) == 1:
         status = "unique"
         best = good[0]
@@ -153,14 +161,16 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "rows": problem.size,
             "rank": answer.rank,
             "redundancy": redundancy(problem, checked or answer),
+            "search": "complete" if solutions.complete else "local",
         }
     )
     if best is None:
         return result  # no pose to plan the next touch or a target from
     if plan_next:
-        result["next_touch"] = result["separating_touch"] or _next_touch(features, best)
+        result["next_touch"] = result["separating_touch"] or (
+            None if candidates is None else _next_touch(features, best, candidates))
     if target_sigma is not None:
-        result["target"] = _target(features, best, problem.sigma, target_sigma, (s_t, s_r))
+        result["target"] = _target(features, best, problem.sigma, target_sigma, (s_t, s_r), candidates)
     return result
 
 
@@ -183,24 +193,24 @@ def _distinct(solutions):
 MAX_MORE_TOUCHES = 30  # planned touches tried before a target is called out of reach
 
 
-def _next_touch(features, solution):
-    planned, _ = next_touches(features, solution)
+def _next_touch(features, solution, candidates):
+    planned, _ = next_touches(features, solution, candidates)
     _, fid, point, normal = planned[0]
     R, t = solution.rotation, solution.translation
     return {"feature": fid, "point_fixture_mm": point.tolist(), "point_meas_mm": (R @ point + t).tolist(),
             "approach_meas": (-(R @ normal)).tolist()}
 
 
-def _target(features, solution, sigma_mm, target, now):
+def _target(features, solution, sigma_mm, target, now, candidates):
     """Whether (sigma translation mm, rotation deg) meets ``target`` (None: no limit) and how many planned
-    touches would."""
+    touches would (None without candidates)."""
     def meets(s_t, s_r):
         return s_t is not None and all(limit is None or value <= limit for value, limit in zip((s_t, s_r), target))
 
     met = meets(*now)
     more = 0 if met else None
-    if not met:
-        _, information = next_touches(features, solution, MAX_MORE_TOUCHES)
+    if not met and candidates is not None:
+        _, information = next_touches(features, solution, candidates, MAX_MORE_TOUCHES)
         for k, F in enumerate(information, start=1):
             if meets(*sigmas(covariance_from_information(F, solution.translation, sigma_mm))):
                 more = k

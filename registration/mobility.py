@@ -41,3 +41,9 @@ def null_space(matrix, length_mm=None) -> np.ndarray:
     scaled = np.vstack([_scaled(matrix, length_mm), np.zeros((1, matrix.shape[1]))])
     free = np.linalg.svd(scaled)[2][matrix_rank(matrix, length_mm):]
     return free if length_mm is None else free / np.array([length_mm] * 3 + [1.0] * 3)
+
+
+def weakest_motion(matrix, length_mm=None) -> np.ndarray:
+    """The twist (1, n) the rows (k, n) determine worst: the last right singular vector, scaled coordinates."""
+    weakest = np.linalg.svd(_scaled(matrix, length_mm))[2][-1:]
+    return weakest if length_mm is None else weakest / np.array([length_mm] * 3 + [1.0] * 3)

@@ -16,7 +16,7 @@ the generated standalone ``register.py``.
 import numpy as np
 
 from .elements import CORE_WORDS, element, perpendicular_basis
-from .mobility import matrix_rank, null_space
+from .mobility import matrix_rank, null_space, weakest_motion
 
 COLLINEAR_MM = 1e-6  # touches this close to the line through the first and last lie on it
 PARALLEL_COS = 1e-9  # 1 - |cos| below which an axis is parallel to a named direction
@@ -128,15 +128,16 @@ def free_motion_names(free, points=None, lines=None, planes=None, length_mm=None
     return words
 
 
-def free_motions(problem, solution, features=None):
-    """Names of the motions the touches leave free, relative to the fixture's features, fixture frame.
+def free_motions(problem, solution, features=None, weak=False):
+    """Names of the motions the touches leave free (``weak``: the one they determine worst), relative to
+    the fixture's features, fixture frame.
 
     Named geometry: every feature (a plane, a sphere's centre, a cylinder's
     axis, a line), the lines through touches that lie on one, and the lines
     through two sphere centres.
     """
     length = problem.scale()
-    free = null_space(solution.jacobian, length)
+    free = (weakest_motion if weak else null_space)(solution.jacobian, length)
     if not len(free):
         return []
     # Measurement-frame twists (w, v) seen in the fixture frame: (R^T w, R^T (v + w x t)).

@@ -115,6 +115,37 @@ def _patch(feature):
     return points, float(t[1] - t[0])
 
 
+_BOXES = {}  # id(feature) -> (feature, box): a registration asks for the same features' boxes again
+BOXES_KEPT = 256
+
+
+def patch_box(feature):
+    """Axis-aligned box (lo (3,), hi (3,)) mm, fixture frame, that holds the feature's whole patch.
+
+    The sampled patch grown by its grid spacing (and, on a cylinder, by the
+    arc between its angle steps); a sphere's box holds the whole sphere; an
+    unbounded patch's box is infinite.
+    """
+    kept = _BOXES.get(id(feature))
+    if kept is None or kept[0] is not feature:
+        if len(_BOXES) >= BOXES_KEPT:
+            _BOXES.clear()
+        kept = _BOXES[id(feature)] = (feature, _box(feature))
+    return kept[1]
+
+
+def _box(feature):
+    core, anchor, _, radius = feature.core()
+    if core == "point" and radius:
+        return anchor - radius, anchor + radius
+    try:
+        points, spacing = _patch(feature)
+    except ValueError:
+        return np.full(3, -np.inf), np.full(3, np.inf)
+    pad = spacing + 2.0 * np.pi * radius / GRID
+    return points.min(axis=0) - pad, points.max(axis=0) + pad
+
+
 @dataclass(frozen=True)
 class PatchSize:
     """Where a patch lies and how far it reaches, fixture frame.

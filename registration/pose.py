@@ -22,8 +22,18 @@ def skew(w):
 
 
 def rotation_from_vector(omega):
-    """Rodrigues: the rotation matrix exp([omega]) of a rotation vector (3,) rad."""
+    """Rodrigues: the rotation matrix exp([omega]) of a rotation vector (3,) rad, or matrices (K, 3, 3)
+    of rotation vectors (K, 3)."""
     omega = np.asarray(omega, dtype=np.float64)
+    if omega.ndim == 2:
+        angle = np.linalg.norm(omega, axis=1)[:, None, None]
+        K = np.zeros((len(omega), 3, 3))
+        K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -omega[:, 2], omega[:, 1], -omega[:, 0]
+        K = K - K.transpose(0, 2, 1)
+        small = angle < 1e-8
+        a = np.where(small, 1.0, np.sin(angle) / np.where(small, 1.0, angle))
+        b = np.where(small, 0.5, (1.0 - np.cos(angle)) / np.where(small, 1.0, angle) ** 2)
+        return np.eye(3) + a * K + b * (K @ K)
     angle = float(np.linalg.norm(omega))
     K = skew(omega)
     if angle < 1e-8:

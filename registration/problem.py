@@ -127,16 +127,16 @@ class Problem:
             for key, value in g.sensor.geometry.items():
                 value = np.broadcast_to(value, (g.count,) + np.shape(value)[1:] if np.ndim(value) else (g.count,))
                 if key in POINT_KEYS:
-                    moved = np.einsum("kji,knj->kni", rotations, value[None] - translations[:, None])
+                    moved = (value[None] - translations[:, None]) @ rotations
                 elif key in DIRECTION_KEYS:
-                    moved = np.einsum("kji,knj->kni", rotations, np.broadcast_to(value, (K,) + value.shape))
+                    moved = value[None] @ rotations
                 else:
                     moved = np.broadcast_to(value, (K,) + value.shape)
                 geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
             sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
             v, J = residuals_and_jacobian(g.ctype, sensor, g.fixture, np.eye(3), np.zeros(3), np.tile(g.rho, K))
             if not is_point_sensor(g.sensor):
-                centres = np.einsum("kji,knj->kni", rotations, g.centre[None] - translations[:, None])
+                centres = (g.centre[None] - translations[:, None]) @ rotations
                 v, J = whitened(v, J, centres.reshape(-1, 3), self.lever)
             values.append(v.reshape(K, -1))
             jacobians.append(J.reshape(K, -1, 6))
@@ -212,5 +212,6 @@ def _subset(group, keep):
     sensor = cut(group.sensor)
     rho = group.rho[keep]
     points = None if group.points is None else group.points[keep]
+    approach = None if group.approach is None else group.approach[keep]
     return TouchGroup(group.feature, group.ctype, sensor, group.fixture, rho, group.index[keep], points, group.rows,
-                      centre=group.centre[keep])
+                      approach, group.centre[keep], group.located)

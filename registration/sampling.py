@@ -7,6 +7,8 @@ sensors are placed analytically. trimesh is imported here only, never by the
 engine.
 """
 
+from pathlib import Path
+
 import numpy as np
 
 from .defaults import SENSOR_LEVER_MM
@@ -14,7 +16,7 @@ from .synthetic import perturb_touches, plan_touches
 from .deviations import entry_on
 from .elements import element
 from .features import feature_from_json
-from .tolerance import coordinates, modes
+from .tolerance import coordinates, deviated, modes
 from .pose import fixture2meas_from_rt, random_rotation
 
 VERTEX_ON_SURFACE_MM = 1e-3  # a feature's triangles have all three vertices this close to it
@@ -23,29 +25,43 @@ POSE_TRANSLATION_RANGE_MM = 100.0  # random poses: translation uniform in +- thi
 
 
 MESH_VOLUME_TOLERANCE = 0.01  # relative: the tessellation's chords change the volume by far less
+# A binary STL facet: its normal, three vertices (mm) and an attribute word, after an 80-byte header and a count.
+STL_RECORD = np.dtype([("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+def read_triangles(path, volume_mm3=None) -> np.ndarray:
+    """The triangles (m, 3, 3) mm of the fixture's binary STL; ValueError (one line) when it is damaged:
+    not that many facets as its header says, or not enclosing the recorded volume (mm^3)."""
+    try:
+        data = Path(path).read_bytes()
+        count = int(np.frombuffer(data, "<u4", 1, 80)[0])
+        if len(data) != 84 + count * STL_RECORD.itemsize:
+            raise ValueError
+    except (OSError, ValueError):
+        raise ValueError(f"{path} is damaged (not readable as STL): rebuild the fixture") from None
+    triangles = np.frombuffer(data, STL_RECORD, count, 84)["tri"].astype(np.float64)
+    volume = np.einsum("ij,ij->", triangles[:, 0], np.cross(triangles[:, 1], triangles[:, 2])) / 6.0
+    if not count or (volume_mm3 is not None and not abs(volume - volume_mm3) <= MESH_VOLUME_TOLERANCE * volume_mm3):
+        raise ValueError(f"{path} is damaged (not a closed mesh of the fixture's volume): rebuild the fixture")
+    return triangles
 
 
 def load_mesh(path, volume_mm3=None):
-    """The fixture's STL; ValueError (one line) when it does not enclose the recorded volume (mm^3)."""
+    """The fixture's STL as a trimesh mesh (three vertices a triangle, as in the file); ValueError as
+    :func:`read_triangles`."""
     import trimesh
 
-    try:
-        mesh = trimesh.load_mesh(str(path), file_type="stl", process=False)
-    except Exception:  # trimesh raises many kinds on a damaged file
-        raise ValueError(f"{path} is damaged (not readable as STL): rebuild the fixture") from None
-    # A truncated file loses triangles: the enclosed volume tells (the unmerged mesh is never "watertight").
-    if not isinstance(mesh, trimesh.Trimesh) or not len(mesh.faces) or (
-            volume_mm3 is not None and not abs(mesh.volume - volume_mm3) <= MESH_VOLUME_TOLERANCE * volume_mm3):
-        raise ValueError(f"{path} is damaged (not a closed mesh of the fixture's volume): rebuild the fixture")
-    return mesh
+    triangles = read_triangles(path, volume_mm3)
+    return trimesh.Trimesh(triangles.reshape(-1, 3), np.arange(3 * len(triangles)).reshape(-1, 3), process=False)
 
 
 def plan_entries(document, plan="default"):
-    """Touch-plan entries of a named plan of a features.json document."""
+    """Touch-plan entries of a named plan of a features.json document, and the radius (mm) of the ball tip
+    whose centres its points are (0: a point probe)."""
     plans = document.get("plans") or {}
     if plan not in plans:
         raise ValueError(f"unknown touch plan {plan!r}; choose from {', '.join(sorted(plans))}")
-    return plans[plan]["touch_plan"]
+    return plans[plan]["touch_plan"], float(plans[plan].get("ball_radius_mm", 0.0))
 
 
 def feature_faces(mesh, feature):
@@ -103,7 +119,7 @@ class TouchSampler:
         # The mesh is the drawing's: an as-built folder keeps the drawing's features to find it by.
         drawing = (document.get("calibration") or {}).get("drawing")
         self.drawing = self.features if drawing is None else {e["id"]: feature_from_json(e) for e in drawing}
-        self.entries = plan_entries(document, plan)
+        self.entries, self.ball_radius_mm = plan_entries(document, plan)
         self.mesh = mesh
         self.random_positions = random_positions
         self.faces = {}
@@ -119,12 +135,14 @@ class TouchSampler:
         for entry in self.entries:
             points = np.asarray(entry["points"], float).reshape(-1, 3)
             if entry["feature"] in self.faces and "sensor" not in entry:
+                # Where the probe touches: a ball tip's centre is its radius off the surface.
+                points = points - self.ball_radius_mm * self.drawing[entry["feature"]].normal_at(points)
                 points = closest_on_faces(mesh, self.faces[entry["feature"]], points)
             self.snapped.append(points)
 
     def fixture_entries(self, rng):
-        """Plan entries with their points on the mesh (nominal or random), fixture frame; on an
-        as-built folder, moved from the drawing's features onto the as-built ones."""
+        """Plan entries with their points on the mesh (nominal or random, where the probe touches), fixture
+        frame; on an as-built folder, moved from the drawing's features onto the as-built ones."""
         out = []
         for entry, snapped in zip(self.entries, self.snapped):
             points = snapped
@@ -141,6 +159,16 @@ class TouchSampler:
                 entry = entry_on(entry, modes_of_drawing, coordinates(modes_of_drawing, self.features[entry["feature"]]))
             out.append(entry)
         return out
+
+    def _centres(self, entry, printed):
+        """A ball tip's entry with its centres: its radius out from the touched points, along the normal of
+        the feature touched (as printed, when it is)."""
+        if "sensor" in entry:
+            return entry
+        fid = entry["feature"]
+        feature = self.features[fid] if printed is None else deviated(self.tolerance.modes[fid], printed[fid])
+        points = np.asarray(entry["points"], float)
+        return {**entry, "points": (points + self.ball_radius_mm * feature.normal_at(points)).tolist()}
 
     def draw(self, rng, noise_mm, fixture2meas=None, lever_mm=SENSOR_LEVER_MM, printed=None):
         """(touches by feature, contacts, true fixture2meas), sensors placed with noise ``noise_mm``.
@@ -160,6 +188,8 @@ class TouchSampler:
         if printed is not None:
             entries = [self.tolerance.printed_entry(entry, printed) for entry in entries]
             truth = fixture2meas @ self.tolerance.frame_change(printed)
+        if self.ball_radius_mm > 0:
+            entries = [self._centres(entry, printed) for entry in entries]
         touches, contacts = plan_touches(entries, fixture2meas)
         touches, contacts = perturb_touches(touches, contacts, rng, noise_mm, lever_mm)
         return touches, contacts, truth

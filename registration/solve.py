@@ -8,26 +8,30 @@ import numpy as np
 
 from .fits import sphere_centre_candidates
 from .least_squares import levenberg_marquardt
-from .pose import check_fixture2meas
+from .pose import check_fixture2meas, vector_from_rotation
 from .starts import best_starts, initial_poses
-from .verdict import SAME_POSE_TRANSLATION_MM, Solution, judged, same_pose
+from .search import leaf_starts, translation_starts
+from .verdict import CHI2_CONFIDENCE, SAME_POSE_TRANSLATION_MM, Solution, chi_square_quantile, judged, same_pose
 
 REFINED_WHEN_NONE_PASS = 3  # candidates refined with the part's deviations when none passes as noise
 
-def solve(problem, initial_pose=None, batch=6):
-    """All distinct local solutions from the starts, best first (list of Solution).
+def solve(problem, initial_pose=None, batch=6, complete=True):
+    """All distinct local solutions from the starts, best first (:class:`Solutions`).
 
     Starts are refined ``batch`` at a time, best predicted first, until one
-    batch yields an admissible solution that passes the residual test. On a
+    batch yields an admissible solution that passes the residual test.
+    ``complete``: without a nominal pose, look for every pose that passes
+    (:mod:`.search`), where it applies; else the closed-form starts only. On a
     printed part the search runs on the touches alone, the part's deviations
     taken as independent noise (much cheaper rows), and each pose found is
     then refined and judged with them.
     """
     if problem.tolerance is None:
-        return _search(problem, initial_pose, batch)
+        return _search(problem, initial_pose, batch, complete)
     length = problem.scale()
-    solutions = []
-    found = _search(problem.as_noise(), initial_pose, batch)
+    found = _search(problem.as_noise(), initial_pose, batch, complete)
+    solutions = Solutions()
+    solutions.complete = found.complete
     # Refine what may be a solution (the candidates that pass, or else the best few); judge the rest as they are.
     plausible = [s for s in found if s.passes] or found[:REFINED_WHEN_NONE_PASS]
     for candidate in found:
@@ -43,18 +47,33 @@ def solve(problem, initial_pose=None, batch=6):
     return solutions
 
 
-def _search(problem, initial_pose, batch):
+class Solutions(list):
+    """Solutions best first; ``complete``: found by the certified search (:mod:`.search`), so that no pose
+    that passes is missing from them."""
+
+    complete = False
+
+
+def _search(problem, initial_pose, batch, complete):
     far = False
     if initial_pose is not None:
+        complete = False
         T = check_fixture2meas(initial_pose)
         starts, first_batch = [(T[:3, :3], T[:3, 3])], 1
     else:
-        found = initial_poses(problem)
-        starts, first_batch = best_starts(problem, found)
-        far = found.far
+        threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
+        starts = leaf_starts(problem, threshold) if complete else None
+        complete = starts is not None
+        if complete:
+            first_batch = len(starts)
+        if not starts:  # not certified, or no pose passes: the best fits, for what the verdict says of them
+            found = initial_poses(problem)
+            starts, first_batch = best_starts(problem, found)
+            far = found.far
     length = problem.scale()
-    solutions = []
-    # The first batch holds every local minimum of the sweep: all solutions are looked for.
+    solutions = Solutions()
+    solutions.complete = complete
+    # The first batch holds every local minimum of the sweep (every leaf): all solutions are looked for.
     bounds = [0, max(first_batch, 1)]
     while bounds[-1] < len(starts):
         bounds.append(bounds[-1] + batch)
@@ -68,6 +87,15 @@ def _search(problem, initial_pose, batch):
             solutions.append(judged(problem, Solution(R, t, r, J), length))
         if any(s.passes and s.admissible for s in solutions):
             break
+    if not complete and initial_pose is None:
+        # Poses that share a found pose's rotation: the one search a local search can afford everywhere.
+        threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
+        for found in [s for s in solutions if s.passes and s.admissible]:
+            for t in translation_starts(problem, found.rotation, threshold):
+                known = [(s.rotation, s.translation) for s in solutions]
+                R, t, r, J = levenberg_marquardt(problem, found.rotation, t, known=known)
+                if not any(same_pose((R, t), pose) for pose in known):
+                    solutions.append(judged(problem, Solution(R, t, r, J), length))
     # Closed-form alternatives: a sphere touched three times has two candidate
     # centres; re-seed each solution with the other one.
     point_groups = [g for g in problem.groups if g.points is not None]
@@ -85,4 +113,28 @@ def _search(problem, initial_pose, batch):
                     continue
                 solutions.append(judged(problem, Solution(R, t, r, J), length))
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
-    return solutions
+    return _told_apart(solutions, problem.sigma)
+
+
+SAME_POSE_CHI2 = chi_square_quantile(CHI2_CONFIDENCE, 6)  # poses closer than this (Mahalanobis^2) are one
+
+
+def _told_apart(solutions, sigma):
+    """The solutions less those that pass but lie inside a better passing one's confidence region: a flat
+    valley's minima are one pose with its uncertainty, not several."""
+    kept = Solutions()
+    kept.complete = solutions.complete
+    for s in solutions:
+        if s.passes and s.admissible and s.rank == 6 and any(
+                k.passes and k.admissible and k.rank == 6 and _mahalanobis(k, s, sigma) < SAME_POSE_CHI2
+                for k in kept):
+            continue
+        kept.append(s)
+    return kept
+
+
+def _mahalanobis(a, b, sigma):
+    """The squared Mahalanobis distance of pose b from pose a under a's information."""
+    E = b.rotation @ a.rotation.T
+    d = np.concatenate([vector_from_rotation(E), b.translation - E @ a.translation])
+    return float(d @ (a.jacobian.T @ a.jacobian) @ d) / sigma**2

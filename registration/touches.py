@@ -29,6 +29,7 @@ class TouchGroup:
     ``index`` (n,) numbers the touches in the caller's order.
     ``centre`` (n, 3) mm, measurement frame: the point the sensor's placement
     error turns about (see :func:`placement_centre`); None: from the sensor.
+    ``located``: that point is the sensor's known contact point on the feature.
     """
 
     feature: object
@@ -41,6 +42,7 @@ class TouchGroup:
     rows: int = 0
     approach: np.ndarray | None = None
     centre: np.ndarray | None = None
+    located: bool = False  # a sensor's contact point (``centre``) is known: it must lie on the feature's patch
 
     @property
     def count(self) -> int:
@@ -157,7 +159,8 @@ def contact_touch(feature, contact: str, sensor: dict, index: int, rho=None, fix
         radii = (float(np.reshape(geometry.get("r", 0.0), -1)[0]), float(feature.core()[3]))
         rho = sum(r for r, fixed in zip(radii, (ctype.sensor_fixed, ctype.fixture_fixed)) if ctype.is_locus or not fixed)
     centre = placement_centre(ctype.sensor, geometry, None if contact_point is None else np.reshape(contact_point, (1, 3)))
-    return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre)
+    return TouchGroup(feature, ctype, side, fside, np.array([float(rho)]), np.array([index]), centre=centre,
+                      located=contact_point is not None or "o" in geometry)
 
 
 def build_groups(features, touches, ball_radius_mm=0.0, contacts=(), approaches=None):

@@ -79,10 +79,12 @@ def read_touch_csv(text, feature_ids):
     return {key: np.array(value) for key, value in touches.items()}, (arrays if width == 7 else {}), lines
 
 
-def touch_csv(entries, plan_name):
-    """A touch CSV a user fills in: a point-touch plan's nominal points (fixture frame, mm), with how to."""
-    lines = [f"# Touch plan {plan_name!r}: the nominal points in the fixture frame, mm. Replace each x,y,z",
-             "# by the point the probe measured on that feature (measurement frame), keep the feature ids;",
+def touch_csv(entries, plan_name, ball_radius_mm=0.0):
+    """A touch CSV a user fills in: a plan's nominal probe points (a ball tip's centres when
+    ``ball_radius_mm`` > 0), fixture frame, mm, with how to."""
+    what = f"ball centres (--ball-radius {ball_radius_mm:g})" if ball_radius_mm > 0 else "points"
+    lines = [f"# Touch plan {plan_name!r}: the nominal {what} in the fixture frame, mm. Replace each x,y,z",
+             "# by the one the probe measured on that feature (measurement frame), keep the feature ids;",
              "# add or remove rows as you touch. Lines starting with # are skipped.",
              ",".join(CSV_COLUMNS)]
     for entry in entries:
@@ -322,11 +324,18 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
     return result
 
 
+SEARCH_WORDS = {
+    "complete": "search: complete (every pose the touches admit was looked for)",
+    "local": "search: local (near the nominal pose or the closed-form starts only; other poses may fit)",
+}
+
+
 def format_result(result, pose_format="matrix"):
     """A short human-readable report of a registration result, the pose in a controller's convention."""
     from .controllers import format_pose
 
-    lines = [f"status: {result['status']}", f"rms residual: {result['rms_residual_mm']:.6f} mm"]
+    lines = [f"status: {result['status']}", SEARCH_WORDS[result["search"]],
+             f"rms residual: {result['rms_residual_mm']:.6f} mm"]
     if result["sigma_translation_mm"] is not None:
         lines.append(
             f"sigma: {result['sigma_translation_mm']:.6f} mm, {result['sigma_rotation_deg']:.6f} deg"

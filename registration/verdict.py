@@ -19,7 +19,8 @@ from .pose import fixture2meas_from_rt, rotation_angle, skew
 
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
-EXTENT_SIGMAS = 3.0  # ... plus this many standard deviations of the touch's position under the pose
+EXTENT_SIGMAS = 3.0  # ... plus this many standard deviations of the touch's position under the pose ...
+EXTENT_WIDENING_MAX_MM = 1.0  # ... but never more than this: a pose known worse is not judged on its patches
 SAME_POSE_ROTATION_RAD = 1e-4
 SAME_POSE_TRANSLATION_MM = 1e-3
 
@@ -41,6 +42,12 @@ class Solution:
     passes: bool = True
     admissible: bool = True
     outside: list = field(default_factory=list)
+    spread_mm: float = 0.0  # the largest of the touches' spreads (:func:`touch_spreads`)
+
+    @property
+    def weak(self):
+        """Determined, but too poorly to judge its touches on their patches."""
+        return self.rank == 6 and self.spread_mm > EXTENT_WIDENING_MAX_MM
 
     @property
     def fixture2meas(self):
@@ -93,34 +100,39 @@ def chi_square_passes(cost, rows, rank, sigma):
     return cost / sigma**2 <= chi_square_quantile(CHI2_CONFIDENCE, dof)
 
 
-def inadmissible(problem, rotation, translation, jacobian=None, tolerance=EXTENT_TOLERANCE_MM):
+def touch_spreads(problem, jacobian):
+    """How far (mm) each point touch's place on the fixture is unsure under the pose: three standard
+    deviations, {touch index: mm}; None when the pose leaves motions free."""
+    F = jacobian.T @ jacobian
+    if np.linalg.cond(F) >= 1e14:
+        return None
+    twist_cov = problem.sigma**2 * np.linalg.inv(F)
+    spreads = {}
+    for g in _placed(problem):
+        for index, point in zip(g.index, g.centre):
+            # A spatial twist moves the touch's fixture point p by omega x p + v.
+            J = np.hstack([-skew(point), np.eye(3)])
+            spreads[int(index)] = EXTENT_SIGMAS * np.sqrt(max(np.trace(J @ twist_cov @ J.T), 0.0))
+    return spreads
+
+
+def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_TOLERANCE_MM):
     """Touch indices that cannot have happened at this pose.
 
-    A touch is inadmissible when its contact, mapped into the fixture frame,
+    A touch is inadmissible when its contact (a probe's point, a ball's
+    centre, a sensor's known contact point), mapped into the fixture frame,
     lies off the feature's finite patch, or when the probe's approach
     direction (if known) points along the outward surface normal there. With
-    the Jacobian, the patch is widened by three standard deviations of where
-    the pose puts each touch, so a poorly determined pose is not refused for
-    its own uncertainty.
+    the touches' ``spreads`` (:func:`touch_spreads`), the patch is widened by
+    each, at most by ``EXTENT_WIDENING_MAX_MM``, so a poorly determined pose is
+    not refused for its own uncertainty.
     """
-    twist_cov = None
-    if jacobian is not None:
-        F = jacobian.T @ jacobian
-        if np.linalg.cond(F) < 1e14:
-            twist_cov = problem.sigma**2 * np.linalg.inv(F)
     bad = set()
-    for g in problem.groups:
-        if g.points is None:
-            continue
-        local = (g.points - translation) @ rotation
+    for g in _placed(problem):
+        local = (g.centre - translation) @ rotation
         slack = tolerance
-        if twist_cov is not None:
-            # A spatial twist moves the touch's fixture point p by omega x p + v.
-            spread = np.zeros(len(g.points))
-            for k, point in enumerate(g.points):
-                J = np.hstack([-skew(point), np.eye(3)])
-                spread[k] = np.sqrt(max(np.trace(J @ twist_cov @ J.T), 0.0))
-            slack = tolerance + EXTENT_SIGMAS * spread
+        if spreads is not None:
+            slack = tolerance + np.minimum([spreads[int(i)] for i in g.index], EXTENT_WIDENING_MAX_MM)
         inside = np.asarray(g.feature.contains(local, slack))
         bad.update(int(i) for i in g.index[~inside])
         if g.approach is not None and g.feature.kind in ("plane", "sphere", "cylinder"):
@@ -130,10 +142,18 @@ def inadmissible(problem, rotation, translation, jacobian=None, tolerance=EXTENT
     return sorted(bad)
 
 
+def _placed(problem):
+    """The touch groups whose places on the fixture are known: point and ball touches, and sensors whose
+    contact point is given (a pose that puts it off its patch cannot have happened)."""
+    return [g for g in problem.groups if g.points is not None or g.located]
+
+
 def judged(problem, candidate, length):
-    """A solution with its rank, residual test and extent check filled in."""
+    """A solution with its rank, residual test, extent check and touch spread filled in."""
     candidate.rank = matrix_rank(candidate.jacobian, length)
     candidate.passes = chi_square_passes(candidate.cost, len(candidate.residuals), candidate.rank, problem.sigma)
-    candidate.outside = inadmissible(problem, candidate.rotation, candidate.translation, candidate.jacobian)
+    spreads = touch_spreads(problem, candidate.jacobian)
+    candidate.spread_mm = max(spreads.values(), default=0.0) if spreads is not None else np.inf
+    candidate.outside = inadmissible(problem, candidate.rotation, candidate.translation, spreads)
     candidate.admissible = not candidate.outside
     return candidate

@@ -120,8 +120,8 @@ class QuarterSphere(Template):
                             "the paper's four contacts plus a second sphere touch that removes the two-fold solution"),
             # The sphere touch is met again with the part moved along the edge by twice its x.
             "paper": Plan(self.contact_class, paper, f"Example One exactly: two exact solutions, the second "
-                          f"{2 * sphere_1[0]:.1f} mm along the edge; register finds the first only and says unique "
-                          "(use the default plan)"),
+                          f"{2 * sphere_1[0]:.1f} mm along the edge, where the sensors would touch beyond the "
+                          "part's flat and edge: register finds both and rules the second out"),
             "point-probe": Plan("{S-S}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}", point_probe,
                                 "point probe only: 3 + 2 flat touches, 2 sphere touches for a unique pose"),
         }

@@ -479,17 +479,22 @@ def test_the_chi_square_quantile_is_scipys():
             assert chi_square_quantile(probability, dof) == pytest.approx(chi2.ppf(probability, dof), rel=1e-10)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12 (open): the start-based search misses Example One's second "
-                                       "solution, 47.81 mm along the edge, and says unique (the plan's note says so)")
-def test_the_paper_example_one_has_two_solutions_along_the_edge():
-    """The paper's Example One: the sphere touch leaves two exact, admissible poses along the edge."""
+def test_the_paper_example_one_rules_out_its_second_solution_on_the_real_part():
+    """The paper's Example One: the sphere touch leaves two exact poses along the edge; the second puts the
+    plane sensor's and the line sensor's contact points off the real part's flat and edge, so it is found
+    and ruled out: unique, at the first."""
     from fixturecad.build import features_document
     from fixturecad.registration.features import features_from_json
-    from fixturecad.registration.synthetic import plan_touches
+    from fixturecad.registration.solve import solve
     from fixturecad.templates import make
 
     document = features_document(make("quarter-sphere"))
     touches, contacts = plan_touches(document["plans"]["paper"]["touch_plan"], np.eye(4))
-    result = register_touches(features_from_json(document), touches, contacts=contacts)
-    along = sorted(round(np.array(s["pose"])[0, 3], 2) for s in result["solutions"])
-    assert result["status"] == "ambiguous" and along == [0.0, 47.81]
+    features = features_from_json(document)
+    result = register_touches(features, touches, contacts=contacts)
+    assert result["status"] == "unique" and np.abs(np.array(result["pose"]) - np.eye(4)).max() < 1e-9
+    found = solve(Problem(build_groups(features, touches, 0.0, contacts)))
+    # The two along the edge keep the part's orientation (others, turned over, are off the part too).
+    exact = sorted((round(s.translation[0] + 0.0, 2), s.admissible) for s in found
+                   if s.passes and np.abs(s.rotation - np.eye(3)).max() < 1e-6)
+    assert exact == [(0.0, True), (47.81, False)]

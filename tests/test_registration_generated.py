@@ -226,7 +226,7 @@ def test_ambiguous_exits_3(tmp_path):
     (tmp_path / "t.csv").write_text("feature,x,y,z\n" + "top,1,2,3\n" * 6)
     result = {"status": "ambiguous", "rms_residual_mm": 0.0, "sigma_translation_mm": None, "pose": np.eye(4).tolist(),
               "solutions": [], "free_motions": [], "flagged": [], "culprit": None, "separating_touch": None,
-              "covariance": None, "inadmissible": []}
+              "covariance": None, "inadmissible": [], "search": "complete"}
     from fixturecad.registration.features import features_from_json
 
     features = features_from_json(features_document("cube"))

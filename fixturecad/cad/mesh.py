@@ -11,6 +11,8 @@ from OCP.BRepTools import BRepTools
 from OCP.TopAbs import TopAbs_REVERSED
 from OCP.TopLoc import TopLoc_Location
 
+from fixturecad.registration.sampling import STL_RECORD
+
 # Largest angle between neighbouring facet normals, rad. The chord tolerance
 # is normally the finer limit; this one only matters on very small radii.
 ANGULAR_TOLERANCE_RAD = 0.5
@@ -111,10 +113,11 @@ def write_stl(path, vertices, faces, name: str = "fixture") -> None:
     tris = vertices[faces].astype(np.float32)
     normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    record = np.zeros(len(faces), dtype=[("normal", "<f4", 3), ("tri", "<f4", (3, 3)), ("attr", "<u2")])
+    record = np.zeros(len(faces), dtype=STL_RECORD)
     record["normal"], record["tri"] = normals, tris
     header = f"{name} fixturecad binary STL, units mm".encode()[:80].ljust(80, b" ")
     with open(path, "wb") as handle:
         handle.write(header)
         handle.write(np.uint32(len(faces)).tobytes())
         handle.write(record.tobytes())
+

@@ -1,0 +1,314 @@
+"""Every admissible pose of a fixture from its touches, by brute force: the answer the engine is judged by.
+
+Independent of the engine on purpose: its pose parametrisation, residuals, starts and optimiser
+(``scipy.optimize.least_squares``) are written here; only the features' own geometry is shared
+(``Feature.signed_distance`` and ``Feature.contains``, what a touch on the part means).
+
+Many seeded random starts (rotation uniform on SO(3), the touches' centroid mapped to a uniform point
+of the fixture's bounding box), and the true pose when it is known, are each refined to a local
+minimum of the touches' residuals: all together by a batched Levenberg-Marquardt descent (cheap), then
+each by its own ``least_squares``, except a start whose descent converged to a minimum that does not
+pass or reached a pose already refined. With noisy touches, a minimum that passes off the patches is
+pulled onto them (its touches' distances beyond the patches as more rows), since poses near it may pass
+on them. A pose is kept when it passes: every touch lies within
+``PATCH_TOLERANCE_MM`` of its feature's finite patch, and the residuals are noise-free (RMS below
+``EXACT_RMS_MM``) or pass a chi-square test at the touch noise sigma. Kept poses closer than
+``SAME_ROTATION_RAD`` and ``SAME_TRANSLATION_MM`` are one.
+
+Point touches and the two sensors of the paper's Example One are modelled: a plane sensor lying on a
+plane feature (its normal against the feature's, its known point on the plane and on the patch) and
+a line sensor crossing a line feature (the two lines meet, the crossing on the line's extent).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import chi2
+
+from fixturecad.registration.patches import patch_points
+
+PATCH_TOLERANCE_MM = 0.2  # how far off its feature's patch a touch may lie (the engine's admissibility)
+CONFIDENCE = 0.999  # chi-square test: a correct pose passes 999 times in 1000
+EXACT_RMS_MM = 1e-6  # a noise-free pose fits to this
+SAME_ROTATION_RAD = 1e-3
+SAME_TRANSLATION_MM = 0.01
+STARTS = 150
+STEP = 1e-6  # central-difference step of the Jacobian, rad and mm
+DESCENT_ITERATIONS = 300  # batched damped steps taking every start to its minimum before least_squares
+CONVERGED_DAMPING = 1e8  # a start whose steps were refused until its damping grew this large is at a minimum
+EXACT_COST_MM2 = 1e-26  # ... as is one that fits this well
+MIN_DAMPING = 1e-9  # relative to the diagonal: keeps a rank-deficient step solvable
+REFINE_EVALUATIONS = 100  # least_squares evaluations from a start the descent left in a slow valley
+PAD_LEVER_MM = 20.0  # a plane sensor's tilt (rad) is seen at this distance from its point, as mm
+INSIDE_TARGET_MM = 0.1  # a pose pulled onto the patches aims at touches at most this far outside ...
+INSIDE_WEIGHT = 10.0  # ... their distance beyond it weighted this much more than a residual
+
+
+@dataclass
+class Pose:
+    """A kept pose: ``fixture2meas`` (4, 4), its residuals' RMS (mm) and squared sum (mm^2)."""
+
+    fixture2meas: np.ndarray
+    rms_mm: float
+    cost_mm2: float
+
+
+def rotations(w):
+    """Rodrigues, batched: rotation matrices (k, 3, 3) of rotation vectors (k, 3) rad."""
+    angle = np.linalg.norm(w, axis=1)[:, None, None]
+    K = np.zeros((len(w), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K = K - K.transpose(0, 2, 1)
+    small = angle < 1e-8
+    safe = np.where(small, 1.0, angle)
+    a = np.where(small, 1.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
+    return np.eye(3) + a * K + b * K @ K
+
+
+def random_rotations(rng, count):
+    """``count`` rotations (count, 3, 3) uniform on SO(3): normalised Gaussian quaternions."""
+    q = rng.normal(size=(count, 4))
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], 1)
+
+
+def bounding_box_mm(features):
+    """(lower, upper) corners of all the features' patches, fixture frame, mm."""
+    points = np.vstack([patch_points(f) for f in features.values()])
+    return points.min(0), points.max(0)
+
+
+class TouchResiduals:
+    """The residual rows of touches at batches of poses, each pose as (A, b): ``q = A (p - c) + b``
+    takes a measured point p into the fixture frame, c the touches' centroid, so that a turn and a
+    shift are not coupled over the distance to the measurement origin (which slows the descent).
+
+    Rows, in order: each feature's point touches (signed distance, mm), then each contact (a plane
+    sensor: its normal against the feature's, two rows scaled by ``PAD_LEVER_MM``, and its point's
+    distance; a line sensor: its distance from the line feature).
+    """
+
+    def __init__(self, features, touches, contacts=()):
+        groups = [(features[fid], np.asarray(p, float).reshape(-1, 3)) for fid, p in touches.items() if np.size(p)]
+        sensors = []
+        for contact in contacts:
+            feature, sensor = features[contact["feature"]], contact["sensor"]
+            if sensor["kind"] == "plane" and feature.kind == "plane":
+                sensors.append(("plane", feature, np.asarray(sensor["point"], float),
+                                np.asarray(sensor["normal"], float) / np.linalg.norm(sensor["normal"])))
+            elif sensor["kind"] == "line" and feature.kind == "line":
+                sensors.append(("line", feature, np.asarray(sensor["point"], float),
+                                np.asarray(sensor["direction"], float) / np.linalg.norm(sensor["direction"])))
+            else:
+                raise ValueError(f"no brute-force model of a {sensor['kind']} sensor on a {feature.kind}")
+        self.centroid_mm = np.vstack([p for _, p in groups] + [c[2] for c in sensors]).mean(0)
+        self.groups = [(feature, p - self.centroid_mm) for feature, p in groups]
+        self.contacts = [(kind, feature, s - self.centroid_mm, d) for kind, feature, s, d in sensors]
+        self.size = sum(len(p) for _, p in self.groups) + sum(3 if c[0] == "plane" else 1 for c in self.contacts)
+
+    def fixture2meas(self, A, b):
+        """The ``fixture2meas`` (4, 4) of a pose (A, b)."""
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = A.T, self.centroid_mm - A.T @ b
+        return T
+
+    def pose_of(self, fixture2meas):
+        """The pose (A, b) of a ``fixture2meas``."""
+        R, t = fixture2meas[:3, :3], fixture2meas[:3, 3]
+        return R.T, R.T @ (self.centroid_mm - t)
+
+    def rows(self, A, b, inside=False):
+        """Residuals (k, size) at k poses, A (k, 3, 3), b (k, 3); ``inside``: and the point touches'
+        distances beyond their patches, less ``INSIDE_TARGET_MM``, weighted ``INSIDE_WEIGHT`` (k, touches)."""
+        k, out = len(A), []
+        if inside:
+            out.append(INSIDE_WEIGHT * np.maximum(self.outside_mm(A, b) - INSIDE_TARGET_MM, 0.0))
+        for feature, P in self.groups:
+            q = np.einsum("kij,nj->kni", A, P) + b[:, None]
+            out.append(feature.signed_distance(q.reshape(-1, 3)).reshape(k, len(P)))
+        for kind, feature, s, d in self.contacts:
+            s_fix, d_fix = A @ s + b, A @ d
+            if kind == "plane":
+                e = np.array(_perpendiculars(feature.normal))
+                out.append(PAD_LEVER_MM * (d_fix + feature.normal) @ e.T)
+                out.append(((s_fix - feature.point) @ feature.normal)[:, None])
+            else:
+                m = np.cross(d_fix, feature.direction)
+                out.append((np.einsum("ki,ki->k", s_fix - feature.point, m) / np.linalg.norm(m, axis=1))[:, None])
+        return np.hstack(out)
+
+    def contact_points(self, A, b):
+        """(feature, fixture-frame point) of every touch and contact location at one pose (A, b)."""
+        out = [(feature, P @ A.T + b) for feature, P in self.groups]
+        for kind, feature, s, d in self.contacts:
+            s_fix, d_fix = A @ s + b, A @ d
+            if kind == "line":
+                # The point of the line feature closest to the sensor line: where they cross.
+                u, w = feature.direction, feature.point - s_fix
+                c = u @ d_fix
+                along = (c * (d_fix @ w) - u @ w) / (1.0 - c * c)
+                s_fix = feature.point + along * u
+            out.append((feature, s_fix[None]))
+        return out
+
+    def outside_mm(self, A, b):
+        """How far (k, touches) mm beyond its feature's patch each point touch lies at k poses (0 inside)."""
+        k, out = len(A), []
+        for feature, P in self.groups:
+            q = feature.closest_point((np.einsum("kij,nj->kni", A, P) + b[:, None]).reshape(-1, 3))
+            core, anchor, direction, _ = feature.core()
+            along = (q - anchor) @ direction if core == "line" else None
+            out.append(np.maximum(-feature.extent.margin(q, along), 0.0).reshape(k, len(P)))
+        return np.hstack(out)
+
+    def admissible(self, A, b, tolerance_mm=PATCH_TOLERANCE_MM):
+        """Whether every touch and contact location lies on its feature's patch at the pose (A, b)."""
+        return all(np.all(feature.contains(points, tolerance_mm)) for feature, points in self.contact_points(A, b))
+
+    def passing_cost_mm2(self, sigma_mm):
+        """The largest squared residual sum that passes: noise-free, or the chi-square test."""
+        if sigma_mm == 0.0:
+            return self.size * EXACT_RMS_MM**2
+        # A set without redundancy fits exactly: one degree of freedom tolerates the solver's residue.
+        return sigma_mm**2 * chi2.ppf(CONFIDENCE, max(self.size - 6, 1))
+
+    def jacobians(self, A, b, inside=False):
+        """Residuals (k, rows) and their Jacobians (k, rows, 6) over (w, b) at ``A = exp(w) A``, by
+        central differences, all k poses in one evaluation (``inside``: see :meth:`rows`)."""
+        steps = STEP * np.vstack([np.eye(6), -np.eye(6)])
+        k = len(A)
+        moved_A = (rotations(np.tile(steps[:, :3], (k, 1))).reshape(k, 12, 3, 3) @ A[:, None]).reshape(-1, 3, 3)
+        moved_b = (b[:, None] + steps[:, 3:]).reshape(-1, 3)
+        values = self.rows(moved_A, moved_b, inside).reshape(k, 12, -1)
+        return self.rows(A, b, inside), ((values[:, :6] - values[:, 6:]) / (2.0 * STEP)).transpose(0, 2, 1)
+
+    def descend(self, A, b, inside=False, iterations=DESCENT_ITERATIONS):
+        """Levenberg-Marquardt on k starts at once (A (k, 3, 3), b (k, 3)), each with its own damping:
+        brings every start to, or near, its local minimum cheaply before :meth:`refine` (``inside``: see
+        :meth:`rows`). Returns the poses and whether each has converged (no step lowers its cost)."""
+        A, b = A.copy(), b.copy()
+        damping = np.full(len(A), 1e-3)
+        r, J = self.jacobians(A, b, inside)
+        cost = np.einsum("km,km->k", r, r)
+        active = np.arange(len(A))
+        for _ in range(iterations):
+            H = J.transpose(0, 2, 1) @ J
+            g = np.einsum("kmi,km->ki", J, r)
+            # Marquardt's scaling, floored so that a parameter the residuals do not see stays solvable.
+            diagonal = np.einsum("kii->ki", H)
+            diagonal = np.maximum(diagonal, 1e-12 * diagonal.max(axis=1, keepdims=True) + 1e-18)
+            lm = H + damping[active, None, None] * diagonal[:, :, None] * np.eye(6)
+            step = -np.linalg.solve(lm, g[..., None])[..., 0]
+            A_try, b_try = rotations(step[:, :3]) @ A[active], b[active] + step[:, 3:]
+            r_try = self.rows(A_try, b_try, inside)
+            cost_try = np.einsum("km,km->k", r_try, r_try)
+            better = cost_try < cost[active]
+            A[active[better]], b[active[better]], cost[active[better]] = A_try[better], b_try[better], cost_try[better]
+            damping[active] = np.where(better, np.maximum(damping[active] / 3.0, MIN_DAMPING), damping[active] * 4.0)
+            active = active[(damping[active] < CONVERGED_DAMPING) & (cost[active] > EXACT_COST_MM2)]
+            if not len(active):
+                break
+            r, J = self.jacobians(A[active], b[active], inside)
+        converged = np.ones(len(A), bool)
+        converged[active] = False
+        return A, b, converged
+
+    def refine(self, A0, b0, inside=False):
+        """The local minimum (A, b, residuals) from a start: ``A = exp(w) A0``, least squares over (w, b).
+
+        ``inside``: with the rows of the point touches' distances beyond their patches (:meth:`rows`): the
+        pose near the start that the patches admit, where the least-squares pose is off them but poses on
+        them may pass too (noisy, poorly determined touches).
+        """
+        def pose(x):
+            return rotations(x[None, :3])[0] @ A0, x[3:]
+
+        def fun(x):
+            A, b = pose(x)
+            return self.rows(A[None], b[None], inside)[0]
+
+        def jac(x):
+            A, b = pose(x)
+            return self.jacobians(A[None], b[None], inside)[1][0]
+
+        fit = least_squares(fun, np.concatenate([np.zeros(3), b0]), jac=jac, method="lm", x_scale="jac",
+                            xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=REFINE_EVALUATIONS)
+        A, b = pose(fit.x)
+        return A, b, self.rows(A[None], b[None])[0]
+
+
+def same(a, b):
+    """Whether two ``fixture2meas`` are one pose (the brute force's resolution)."""
+    return _same_rotation(a[:3, :3], b[:3, :3]) and np.linalg.norm(a[:3, 3] - b[:3, 3]) < SAME_TRANSLATION_MM
+
+
+def _same_rotation(a, b):
+    return np.arccos(np.clip(0.5 * (np.trace(a @ b.T) - 1.0), -1.0, 1.0)) < SAME_ROTATION_RAD
+
+
+def admissible_poses(features, touches, contacts=(), sigma_mm=0.0, truth=None, starts=STARTS, seed=0):
+    """Every admissible pose the brute force finds, best (lowest cost) first (list of :class:`Pose`).
+
+    Parameters
+    ----------
+    features : dict id -> feature
+    touches : dict id -> array-like, shape (n, 3), mm, measurement frame (point-probe touches)
+    contacts : plane or line sensor contacts as :func:`fixturecad.registration.synthetic.plan_touches` makes them
+    sigma_mm : float, touch noise (each axis); 0 for noise-free touches
+    truth : array-like (4, 4), optional ``fixture2meas`` tried as one more start
+    """
+    problem = TouchResiduals(features, touches, contacts)
+    rng = np.random.default_rng(seed)
+    lower, upper = bounding_box_mm(features)
+    A0 = random_rotations(rng, starts)
+    b0 = rng.uniform(lower, upper, size=(starts, 3))  # where the touches' centroid lands, fixture frame
+    if truth is not None:
+        A, b = problem.pose_of(np.asarray(truth, float))
+        A0, b0 = np.vstack([A0, A[None]]), np.vstack([b0, b])
+    passing = problem.passing_cost_mm2(sigma_mm)
+    minima = _minima(problem, A0, b0, passing)
+    # Where a passing pose is off the patches, noisy touches may pass at a pose near it on the patches:
+    # pulled onto them. (Noise-free, a pose passes only where it is exact: no other pose near it does.)
+    off = [(A, b) for A, b, r in minima if r @ r <= passing and not problem.admissible(A, b)]
+    if off and problem.groups and sigma_mm > 0.0:
+        minima += _minima(problem, np.array([A for A, _ in off]), np.array([b for _, b in off]), passing, inside=True)
+    kept = [Pose(problem.fixture2meas(A, b), float(np.sqrt(r @ r / len(r))), float(r @ r))
+            for A, b, r in minima if r @ r <= passing and problem.admissible(A, b)]
+    kept.sort(key=lambda p: p.cost_mm2)
+    distinct = []
+    for pose in kept:
+        if not any(same(pose.fixture2meas, other.fixture2meas) for other in distinct):
+            distinct.append(pose)
+    return distinct
+
+
+def _minima(problem, A0, b0, passing, inside=False):
+    """(A, b, residuals) of the local minima from starts (A0, b0): the batched descent, then each start's
+    own least_squares, except a start whose descent converged to a minimum that does not pass or reached
+    a pose already refined (``inside``: see :meth:`TouchResiduals.rows`)."""
+    A0, b0, converged = problem.descend(A0, b0, inside)
+    r = problem.rows(A0, b0)
+    cost = np.einsum("km,km->k", r, r)
+    out, refined = [], []
+    for k in np.argsort(cost):
+        if converged[k] and cost[k] > passing:
+            continue
+        start = problem.fixture2meas(A0[k], b0[k])
+        if any(same(start, T) for T in refined):
+            continue
+        out.append(problem.refine(A0[k], b0[k], inside))
+        refined.append(problem.fixture2meas(*out[-1][:2]))
+    return out
+
+
+def _perpendiculars(normal):
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(normal, helper)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(normal, e1)

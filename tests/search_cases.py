@@ -1,0 +1,258 @@
+"""Issue 12's random touch layouts, and register_touches judged on each against the brute force.
+
+A layout is touches drawn uniformly on the features' finite patches (the grid of
+:func:`patch_points`) at a random true pose, noise-free or with Gaussian noise of ``SIGMA_MM``
+on each axis. The judge (:func:`judge`) runs the engine and the brute force
+(:mod:`brute_force`) on the same touches and records what the engine got wrong:
+
+* ``wrong_unique``: ``unique`` with a pose off the truth by more than the tolerance;
+* ``unique_missed``: ``unique`` although the brute force finds another admissible pose;
+* ``unique_none``: ``unique`` although the brute force finds no admissible pose at all;
+* ``ambiguous_missing``: ``ambiguous`` without one of the brute force's poses in ``solutions``;
+* ``false_inconsistent``: ``inconsistent`` although the brute force finds an admissible pose;
+* ``separating``: on ``ambiguous``, whether the separating touch lies on the real part (probed where
+  it says, the probe moving along the feature's normal at the true pose) and, added, gives
+  ``unique`` at the true pose.
+
+Poses are compared by the largest displacement of the fixture's patch points (mm), within
+``max(10 sigma, 0.01 mm)``, sigma the largest standard deviation of a patch point under the
+Cramer-Rao bound at the true pose (the brute force's own Jacobian).
+"""
+
+import time
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from brute_force import PATCH_TOLERANCE_MM, TouchResiduals, admissible_poses, random_rotations, rotations
+from fixturecad.build import features_document
+from fixturecad.registration.engine import register_touches
+from fixturecad.registration.features import features_from_json
+from fixturecad.registration.patches import patch_points
+from fixturecad.registration.synthetic import plan_touches
+from fixturecad.templates import make
+
+SIGMA_MM = 0.005  # a touch probe's repeatability, the noisy layouts' noise on each axis
+FAULT_MM = 0.5  # how far the faulty touch is off its surface
+TOLERANCE_SIGMAS = 10.0  # a pose this many standard deviations off the truth is wrong ...
+EXACT_TOLERANCE_MM = 0.01  # ... or this far, noise-free
+TRUE_POSE_RANGE_MM = 100.0  # true fixture origins are uniform in this cube about the measurement origin
+NOMINAL_TWIST = np.concatenate([np.radians(5.0) * np.array([0.6, 0.0, 0.8]), [3.0, 4.0, 0.0]])  # rad, mm
+DISPLACEMENT_POINTS = 400  # patch points over which two poses are compared
+
+
+def _features(template):
+    return features_from_json(features_document(make(template)))
+
+
+def _on_patch(features, counts, rng):
+    return {fid: _draw(features[fid], n, rng) for fid, n in counts.items()}
+
+
+def _draw(feature, count, rng):
+    points = patch_points(feature)
+    return points[rng.choice(len(points), count, replace=False)]
+
+
+def _collinear(features, rng):
+    """4-3-2 cube: the four top touches on the segment between two random top patch points."""
+    ends = _draw(features["top"], 2, rng)
+    touches = _on_patch(features, {"front": 3, "left": 2}, rng)
+    touches["top"] = ends[0] + rng.uniform(0.0, 1.0, (4, 1)) * (ends[1] - ends[0])
+    return touches
+
+
+def _diagonal(features, rng):
+    """3-2-1 cube: the three top touches on the top face's diagonal, x = y."""
+    size = features["top"].point[2]
+    along = rng.uniform(0.0, size, 3)
+    touches = _on_patch(features, {"front": 2, "left": 1}, rng)
+    touches["top"] = np.column_stack([along, along, np.full(3, size)])
+    return touches
+
+
+def _offset_touch(features, rng):
+    """Cube 3-3-3 with one touch FAULT_MM off its face (in or out)."""
+    touches = _on_patch(features, {"top": 3, "front": 3, "left": 3}, rng)
+    fid = rng.choice(sorted(touches))
+    k = rng.integers(3)
+    touches[fid][k] += rng.choice([-1.0, 1.0]) * FAULT_MM * features[fid].normal
+    return touches
+
+
+def _mislabelled_touch(features, rng):
+    """Cube 3-3-3 with one touch made on another face and labelled with this one."""
+    touches = _on_patch(features, {"top": 3, "front": 3, "left": 3}, rng)
+    fid, other = rng.choice(sorted(touches), 2, replace=False)
+    touches[fid][rng.integers(3)] = _draw(features[other], 1, rng)[0]
+    return touches
+
+
+def _counts(counts):
+    return lambda features, rng: _on_patch(features, counts, rng)
+
+
+@dataclass(frozen=True)
+class Case:
+    """A kind of layout: its template, the noise levels it runs at (mm) and how its touches are drawn
+    (fixture frame, by feature id); or a fixed touch plan of the template, sensors included."""
+
+    name: str
+    template: str
+    noise_mm: tuple
+    draw: object = None
+    plan: str = ""
+
+
+CASES = [
+    Case("cube 2-2-2", "cube", (0.0, SIGMA_MM), _counts({"top": 2, "front": 2, "left": 2})),
+    Case("v-block 2-2-2", "v-block", (0.0, SIGMA_MM), _counts({"groove_a": 2, "groove_b": 2, "end": 2})),
+    Case("inclined-plane-cylinder 2+4", "inclined-plane-cylinder", (0.0, SIGMA_MM),
+         _counts({"plane": 2, "cylinder": 4})),
+    Case("Example Two 3+3", "inclined-plane-cylinder", (0.0, SIGMA_MM), _counts({"plane": 3, "cylinder": 3})),
+    Case("Example One (paper plan)", "quarter-sphere", (0.0,), plan="paper"),
+    Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
+    Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
+    Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
+    Case("one touch mislabelled, cube 3-3-3", "cube", (SIGMA_MM,), _mislabelled_touch),
+]
+VARIANTS = [(case, noise) for case in CASES for noise in case.noise_mm]
+
+
+def variant_id(case, noise_mm):
+    return f"{case.name}, {'noise-free' if noise_mm == 0.0 else f'{noise_mm * 1000:g} um'}"
+
+
+@dataclass
+class Layout:
+    """One random layout: features, touches (measurement frame), contacts and the true fixture2meas."""
+
+    features: dict
+    touches: dict
+    contacts: list
+    truth: np.ndarray
+
+
+def layout(case, noise_mm, index):
+    """The seeded layout ``index`` of a case at a noise level."""
+    rng = np.random.default_rng([zlib.crc32(case.name.encode()), int(noise_mm * 1e6), index])
+    features = _features(case.template)
+    truth = np.eye(4)
+    truth[:3, :3] = random_rotations(rng, 1)[0]
+    truth[:3, 3] = rng.uniform(-TRUE_POSE_RANGE_MM, TRUE_POSE_RANGE_MM, 3)
+    if case.plan:
+        touches, contacts = plan_touches(make(case.template).touch_plans()[case.plan].touches, truth)
+    else:
+        touches, contacts = {fid: p @ truth[:3, :3].T + truth[:3, 3] for fid, p in case.draw(features, rng).items()}, []
+    touches = {fid: p + rng.normal(scale=noise_mm, size=p.shape) for fid, p in touches.items()}
+    return Layout(features, touches, contacts, truth)
+
+
+@dataclass
+class Outcome:
+    """What the engine said on one layout and what it got wrong (see the module doc)."""
+
+    status: str
+    found: int  # admissible poses the brute force finds
+    wrong_unique: bool = False
+    unique_missed: bool = False
+    unique_none: bool = False
+    ambiguous_missing: bool = False
+    false_inconsistent: bool = False
+    separating: str = ""  # "", "separates", "missing", "off the part", "does not separate"
+    seconds: dict = field(default_factory=dict)  # CPU s: engine, brute force and (timed) engine with a nominal pose
+
+
+def displacement_mm(a, b, points):
+    """The largest distance (mm) between where two ``fixture2meas`` put fixture ``points`` (n, 3)."""
+    return float(np.max(np.linalg.norm(points @ (a[:3, :3] - b[:3, :3]).T + a[:3, 3] - b[:3, 3], axis=1)))
+
+
+def spread_mm(problem, truth, sigma_mm, points):
+    """The largest standard deviation (mm) of where the pose puts a fixture point, under the Cramer-Rao
+    bound of touches with iid noise ``sigma_mm`` at the true pose; inf when the touches leave a motion
+    free."""
+    if sigma_mm == 0.0:
+        return 0.0
+    A, b = problem.pose_of(truth)
+    _, J = problem.jacobians(A[None], b[None])
+    information = J[0].T @ J[0]
+    if np.linalg.matrix_rank(information) < 6:
+        return np.inf
+    covariance = sigma_mm**2 * np.linalg.inv(information)
+    # Where a fixture point x lands, p = A^T (x - b) + c, moved by each parameter of (w, b).
+    step = 1e-6
+    moved = []
+    for k in range(6):
+        dx = step * np.eye(6)[k]
+        A_k, b_k = rotations(dx[None, :3])[0] @ A, b + dx[3:]
+        moved.append(((points - b_k) @ A_k - (points - b) @ A) / step)
+    G = np.stack(moved, axis=2)  # (n, 3, 6)
+    return float(np.sqrt(np.max(np.einsum("nij,jk,nik->n", G, covariance, G))))
+
+
+def judge(case, noise_mm, index, timed=False):
+    """The :class:`Outcome` of register_touches on layout ``index`` of a case; ``timed``: also time the
+    engine from a nominal pose (``NOMINAL_TWIST`` off the truth)."""
+    lay = layout(case, noise_mm, index)
+    # Noise-free touches are registered at the engine's default sigma, as a user would.
+    kwargs = {"contacts": lay.contacts, **({"sigma_mm": noise_mm} if noise_mm else {})}
+    seconds = {}
+    clock = time.process_time()
+    result = register_touches(lay.features, lay.touches, **kwargs)
+    seconds["engine"] = time.process_time() - clock
+    if timed:
+        nominal = np.eye(4)
+        nominal[:3, :3] = rotations(NOMINAL_TWIST[None, :3])[0] @ lay.truth[:3, :3]
+        nominal[:3, 3] = lay.truth[:3, 3] + NOMINAL_TWIST[3:]
+        clock = time.process_time()
+        register_touches(lay.features, lay.touches, nominal, **kwargs)
+        seconds["engine, nominal pose"] = time.process_time() - clock
+    clock = time.process_time()
+    found = admissible_poses(lay.features, lay.touches, lay.contacts, noise_mm, lay.truth, seed=index)
+    seconds["brute force"] = time.process_time() - clock
+
+    points = np.vstack([patch_points(f) for f in lay.features.values()])
+    points = points[np.random.default_rng(0).choice(len(points), min(len(points), DISPLACEMENT_POINTS), replace=False)]
+    problem = TouchResiduals(lay.features, lay.touches, lay.contacts)
+    tolerance = max(TOLERANCE_SIGMAS * spread_mm(problem, lay.truth, noise_mm, points), EXACT_TOLERANCE_MM)
+
+    def close(a, b):
+        return displacement_mm(np.asarray(a), np.asarray(b), points) <= tolerance
+
+    status = result["status"]
+    out = Outcome(status, len(found), seconds=seconds)
+    listed = [s["pose"] for s in result["solutions"]]
+    if status == "unique":
+        out.wrong_unique = not close(result["pose"], lay.truth)
+        out.unique_missed = len(found) > 1
+        out.unique_none = not found
+    elif status == "ambiguous":
+        out.ambiguous_missing = any(not any(close(p.fixture2meas, s) for s in listed) for p in found)
+        out.separating = _separating(lay, result, kwargs, noise_mm, index, close)
+    elif status == "inconsistent":
+        out.false_inconsistent = bool(found)
+    return out
+
+
+def _separating(lay, result, kwargs, noise_mm, index, close):
+    """Probe where the separating touch says, on the real part; whether it then gives the true pose."""
+    touch = result["separating_touch"]
+    if touch is None:
+        return "missing"
+    feature = lay.features[touch["feature"]]
+    R, t = lay.truth[:3, :3], lay.truth[:3, 3]
+    # The probe goes to point_meas_mm and moves along the surface normal until it touches the real part.
+    on_part = feature.closest_point((np.asarray(touch["point_meas_mm"]) - t) @ R)
+    if not feature.contains(on_part, PATCH_TOLERANCE_MM)[0]:
+        return "off the part"
+    point = on_part[0] @ R.T + t + np.random.default_rng(index).normal(scale=noise_mm, size=3)
+    touches = {fid: p.copy() for fid, p in lay.touches.items()}
+    touches[feature.id] = np.vstack([touches.get(feature.id, np.zeros((0, 3))), point])
+    again = register_touches(lay.features, touches, **kwargs)
+    return "separates" if again["status"] == "unique" and close(again["pose"], lay.truth) else "does not separate"
+
+
+def judge_all(case, noise_mm, layouts, timed=False):
+    return [judge(case, noise_mm, index, timed) for index in range(layouts)]
