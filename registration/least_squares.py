@@ -12,6 +12,7 @@ STEP_TOLERANCE = 1e-4  # LM stops once a step moves the touches less than this m
 STALLED_AFTER = 4  # LM iterations before a refinement may be abandoned as stalled ...
 STALLED_COST_FACTOR = 1e4  # ... while its cost exceeds this many times sigma^2 per row ...
 STALLED_DECREASE = 0.5  # ... and one iteration removes less than half of it
+FLAT_DECREASE = 1e-6  # LM stops once an iteration lowers the cost by less than this many sigma^2
 NEAR_KNOWN_RAD = 1e-3  # a refinement this close to a found solution is converging onto it
 NEAR_KNOWN_MM = 0.05
 
@@ -49,7 +50,8 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
         if not improved:
             break
         small = np.linalg.norm(step[:3]) * length + np.linalg.norm(step[3:]) < STEP_TOLERANCE * problem.sigma
-        tiny = cost - cost2 <= 1e-16 * max(cost, 1e-30) + 1e-30
+        # A decrease this small is nothing to the residual test: in a flat valley LM would creep on for long.
+        tiny = cost - cost2 <= 1e-16 * max(cost, 1e-30) + FLAT_DECREASE * problem.sigma**2
         stalled = may_give_up and iteration >= STALLED_AFTER and cost2 > hopeless and cost2 > STALLED_DECREASE * cost
         rotation, translation, r, J, cost = R2, t2, r2, J2, cost2
         lam = max(lam / 10.0, 1e-9)

@@ -40,7 +40,7 @@ from .fits import sphere_centre_candidates
 from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
-from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM
+from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2
 
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_RAD = 0.045  # cells are split down to this radius (rad), then refined
@@ -66,10 +66,11 @@ def leaf_starts(problem, threshold):
     return search.refined(*leaves) if len(leaves[0]) else []
 
 
-def translation_starts(problem, rotation, threshold):
-    """Translations [t] at which the touches may pass at one rotation: Gauss-Newton from a grid over the
-    touched features' patch boxes, the distinct ends within ``REFINED_FACTOR`` of ``threshold``. A local
-    search's second look: solutions that share a rotation (Example One's two, along its edge)."""
+def translation_starts(problem, rotation, translation, threshold):
+    """Translations [t] other than ``translation`` at which the touches may pass at one rotation: Gauss-Newton
+    from a grid over the touched features' patch boxes, the distinct ends within ``REFINED_FACTOR`` of
+    ``threshold``, one per confidence region. A local search's second look: solutions that share a rotation
+    (Example One's two, along its edge)."""
     boxes = [patch_box(g.feature) for g in problem.groups]
     low, high = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
     if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
@@ -78,16 +79,24 @@ def translation_starts(problem, rotation, threshold):
     anchors = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     # A fixture point at ``anchor`` is put where the touches' centres are: t = c - R anchor.
     centre = np.concatenate([g.centre for g in problem.groups]).mean(axis=0)
-    Rs = np.broadcast_to(rotation, (len(anchors), 3, 3))
-    ts = centre - anchors @ rotation.T
+    ts = np.vstack([translation, centre - anchors @ rotation.T])
+    Rs = np.broadcast_to(rotation, (len(ts), 3, 3))
     for _ in range(REFINE_STEPS):
         r, J = problem.evaluate_batch(Rs, ts)
         J = J[:, :, 3:]
         A = J.transpose(0, 2, 1) @ J + 1e-9 * np.eye(3)
         ts = ts - (Rs @ np.linalg.solve(A, J.transpose(0, 2, 1) @ r[..., None]))[..., 0]
-    cost = np.sum(problem.evaluate_batch(Rs, ts)[0] ** 2, axis=1)
-    kept = _distinct(Rs, ts, cost)
-    return [ts[k] for k in kept if cost[k] <= REFINED_FACTOR * threshold]
+    r, J = problem.evaluate_batch(Rs, ts)
+    cost = np.sum(r**2, axis=1)
+    information = J.transpose(0, 2, 1) @ J / problem.sigma**2
+    # One end per confidence region, none in the given pose's own: a weak valley holds many ends.
+    chosen = [0]
+    for k in _distinct(Rs, ts, cost):
+        if k and cost[k] <= REFINED_FACTOR * threshold and all(
+                _mahalanobis(rotation, ts[j], information[j], Rs[k:k + 1], ts[k:k + 1])[0] >= SAME_POSE_CHI2
+                for j in chosen):
+            chosen.append(k)
+    return [ts[k] for k in chosen[1:]]
 
 
 class RotationSearch:
@@ -204,11 +213,21 @@ class RotationSearch:
             # The fixture-frame twist: x -> R (exp(omega) x + v) + t.
             ts = ts + (Rs @ step[:, 3:, None])[..., 0]
             Rs = Rs @ rotation_from_vector(step[:, :3])
-        cost = np.sum(self.problem.evaluate_batch(Rs, ts)[0] ** 2, axis=1)
+        r, J = self.problem.evaluate_batch(Rs, ts)
+        cost = np.sum(r**2, axis=1)
         kept = _distinct(Rs, ts, cost)
         near = cost[kept] <= REFINED_FACTOR * self.root**2
         near[:UNCONVERGED_KEPT] = True  # the best few of the rest too: a slow refinement is not dropped
-        return [(Rs[k], ts[k]) for k in kept[near]]
+        kept = kept[near]
+        # One start per confidence region: a weakly determined pose's valley holds many refined leaves.
+        information = J.transpose(0, 2, 1) @ J / self.problem.sigma**2
+        chosen, alive = [], np.ones(len(kept), bool)
+        for i, k in enumerate(kept):
+            if alive[i]:
+                chosen.append(k)
+                alive[i + 1:] &= _mahalanobis(Rs[k], ts[k], information[k], Rs[kept[i + 1:]], ts[kept[i + 1:]]) \
+                    >= SAME_POSE_CHI2
+        return [(Rs[k], ts[k]) for k in chosen]
 
 
 def _distinct(Rs, ts, cost):
@@ -218,3 +237,16 @@ def _distinct(Rs, ts, cost):
     keys = np.column_stack([Rs[order].reshape(-1, 9) / SAME_LEAF_RAD, ts[order] / SAME_LEAF_MM])
     first = np.unique(np.round(keys).astype(np.int64), axis=0, return_index=True)[1]
     return order[np.sort(first)]
+
+
+def _mahalanobis(R, t, information, Rs, ts):
+    """Squared Mahalanobis distances (K,) of poses from (R, t) under its information over the fixture-frame
+    twist; poses more than a radian away are infinitely far."""
+    E = R.T @ Rs  # R exp(omega) = R_k
+    cos = np.clip((np.trace(E, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    vee = np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], axis=1)
+    omega = vee * np.where(angle < 1e-9, 0.5, angle / (2.0 * np.sin(np.maximum(angle, 1e-9))))[:, None]
+    twist = np.hstack([omega, (ts - t) @ R])  # t_k = t + R v
+    d = np.einsum("ki,ij,kj->k", twist, information, twist)
+    return np.where(angle < 1.0, d, np.inf)

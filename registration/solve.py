@@ -11,7 +11,8 @@ from .least_squares import levenberg_marquardt
 from .pose import check_fixture2meas, vector_from_rotation
 from .starts import best_starts, initial_poses
 from .search import leaf_starts, translation_starts
-from .verdict import CHI2_CONFIDENCE, SAME_POSE_TRANSLATION_MM, Solution, chi_square_quantile, judged, same_pose
+from .verdict import (CHI2_CONFIDENCE, SAME_POSE_CHI2, SAME_POSE_TRANSLATION_MM, Solution, chi_square_quantile, judged,
+                      same_pose)
 
 REFINED_WHEN_NONE_PASS = 3  # candidates refined with the part's deviations when none passes as noise
 
@@ -85,13 +86,16 @@ def _search(problem, initial_pose, batch, complete):
             if any(same_pose((R, t), pose) for pose in known):
                 continue
             solutions.append(judged(problem, Solution(R, t, r, J), length))
-        if any(s.passes and s.admissible for s in solutions):
+            if solutions[-1].passes and solutions[-1].weak:
+                break  # a pose that passes but is too weak to judge on the patches: the verdict is underdetermined
+        if any(s.passes and (s.admissible or s.weak) for s in solutions):
             break
-    if not complete and initial_pose is None:
+    weak = any(s.passes and s.weak for s in solutions)
+    if not complete and initial_pose is None and not weak:
         # Poses that share a found pose's rotation: the one search a local search can afford everywhere.
         threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
         for found in [s for s in solutions if s.passes and s.admissible]:
-            for t in translation_starts(problem, found.rotation, threshold):
+            for t in translation_starts(problem, found.rotation, found.translation, threshold):
                 known = [(s.rotation, s.translation) for s in solutions]
                 R, t, r, J = levenberg_marquardt(problem, found.rotation, t, known=known)
                 if not any(same_pose((R, t), pose) for pose in known):
@@ -114,9 +118,6 @@ def _search(problem, initial_pose, batch, complete):
                 solutions.append(judged(problem, Solution(R, t, r, J), length))
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
     return _told_apart(solutions, problem.sigma)
-
-
-SAME_POSE_CHI2 = chi_square_quantile(CHI2_CONFIDENCE, 6)  # poses closer than this (Mahalanobis^2) are one
 
 
 def _told_apart(solutions, sigma):

@@ -95,6 +95,9 @@ def chi_square_quantile(probability, dof):
     return 0.5 * (low + high)
 
 
+SAME_POSE_CHI2 = chi_square_quantile(CHI2_CONFIDENCE, 6)  # poses closer than this (Mahalanobis^2) are one
+
+
 def chi_square_passes(cost, rows, rank, sigma):
     dof = max(rows - rank, 1)
     return cost / sigma**2 <= chi_square_quantile(CHI2_CONFIDENCE, dof)
