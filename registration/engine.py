@@ -99,10 +99,10 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     if best.rank < 6:
         status = "underdetermined"
         result["free_motions"] = free_motions(problem, best, features)
-    elif any(s.passes and s.weak for s in solutions):
+    elif any(s.weak for s in good):
         # A pose that passes but too poorly determined to tell on which patch a touch lies: no pose is claimed.
         status = "underdetermined"
-        best = next(s for s in solutions if s.passes and s.weak)
+        best = next(s for s in good if s.weak)
         result["free_motions"] = free_motions(problem, best, features, weak=True)
     elif len(good) == 1:
         status = "unique"

@@ -8,6 +8,7 @@ import numpy as np
 
 from .pose import apply_twist, rotation_angle
 
+MAX_ITERATIONS = 60
 STEP_TOLERANCE = 1e-4  # LM stops once a step moves the touches less than this many sigma
 STALLED_AFTER = 4  # LM iterations before a refinement may be abandoned as stalled ...
 STALLED_COST_FACTOR = 1e4  # ... while its cost exceeds this many times sigma^2 per row ...
@@ -17,7 +18,7 @@ NEAR_KNOWN_RAD = 1e-3  # a refinement this close to a found solution is convergi
 NEAR_KNOWN_MM = 0.05
 
 
-def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=60, known=(),
+def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterations=MAX_ITERATIONS, known=(),
                         may_give_up=True):
     """Minimise the (weighted) sum of squared rows from a pose; return R, t, residuals, Jacobian.
 

@@ -7,13 +7,14 @@ the generated standalone ``register.py``.
 import numpy as np
 
 from .fits import sphere_centre_candidates
-from .least_squares import levenberg_marquardt
+from .least_squares import MAX_ITERATIONS, levenberg_marquardt
 from .pose import check_fixture2meas, vector_from_rotation
 from .starts import best_starts, initial_poses
 from .search import leaf_starts, translation_starts
 from .verdict import (CHI2_CONFIDENCE, SAME_POSE_CHI2, SAME_POSE_TRANSLATION_MM, Solution, chi_square_quantile, judged,
                       same_pose)
 
+LEAF_ITERATIONS = 20  # LM iterations from a refined leaf of the complete search
 REFINED_WHEN_NONE_PASS = 3  # candidates refined with the part's deviations when none passes as noise
 
 def solve(problem, initial_pose=None, batch=6, complete=True):
@@ -81,16 +82,18 @@ def _search(problem, initial_pose, batch, complete):
     for first, last in zip(bounds[:-1], bounds[1:]):
         for R, t in starts[first:last]:
             known = [(s.rotation, s.translation) for s in solutions]
-            # Far starts (no sweep) may take many slow steps: never abandon them.
-            R, t, r, J = levenberg_marquardt(problem, R, t, known=known, may_give_up=not far)
+            # Far starts (no sweep) may take many slow steps: never abandon them. Leaves come refined: a
+            # few steps finish them (more only creep along a weak pose's valley).
+            R, t, r, J = levenberg_marquardt(problem, R, t, known=known, may_give_up=not far,
+                                             max_iterations=LEAF_ITERATIONS if complete else MAX_ITERATIONS)
             if any(same_pose((R, t), pose) for pose in known):
                 continue
             solutions.append(judged(problem, Solution(R, t, r, J), length))
-            if solutions[-1].passes and solutions[-1].weak:
-                break  # a pose that passes but is too weak to judge on the patches: the verdict is underdetermined
-        if any(s.passes and (s.admissible or s.weak) for s in solutions):
+            if solutions[-1].passes and solutions[-1].admissible and solutions[-1].weak:
+                break  # a pose that passes but is too weak to claim: the verdict is underdetermined
+        if any(s.passes and s.admissible for s in solutions):
             break
-    weak = any(s.passes and s.weak for s in solutions)
+    weak = any(s.passes and s.admissible and s.weak for s in solutions)
     if not complete and initial_pose is None and not weak:
         # Poses that share a found pose's rotation: the one search a local search can afford everywhere.
         threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
