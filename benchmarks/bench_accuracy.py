@@ -40,7 +40,7 @@ def fixturecad(*args):
 
 
 def simulate(folder, trials, zone=None):
-    args = ["simulate", folder, "--trials", trials, "--seed", 1]
+    args = ["simulate", folder, "--trials", trials, "--seed", 1, "--force"]
     if zone is not None:
         args += ["--fixture-tolerance", zone]
     fixturecad(*args)
