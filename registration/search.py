@@ -17,8 +17,8 @@ has, at ``R0`` and the same ``y``, a cost of at most
 where no ``y`` brings every touch within ``sqrt(T)`` plus the admissibility
 slack (:mod:`.verdict`) plus ``delta rho_i`` of its patch's box
 (:func:`.patches.patch_box`): no pose of it is admissible. The cells left
-are split in eight until their radius is ``LEAF_RAD``, and every leaf left
-is refined.
+are split in eight until their radius is ``LEAF_RAD`` (or, past
+``MAX_CELLS``, ``COARSEST_LEAF_RAD``), and every leaf left is refined.
 
 The least cost over ``y`` is found by Gauss-Newton from the fixture's centre
 and from every candidate centre of a touched sphere: exact (linear least
@@ -45,7 +45,8 @@ from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_RAD = 0.045  # cells are split down to this radius (rad), then refined
 TRANSLATION_STEPS = 3  # Gauss-Newton steps for the best translation of a cell
-MAX_CELLS = 250000  # cells alive at one level beyond which the search is not completed
+MAX_CELLS = 250000  # cells at one level beyond which they are not split again ...
+COARSEST_LEAF_RAD = 0.09  # ... but refined as leaves when this small; else the search is not completed
 REFINE_STEPS = 8  # batched Gauss-Newton steps from every leaf before the leaves are told apart
 REFINED_FACTOR = 4.0  # refined leaves kept: cost within this many times the residual test's threshold ...
 UNCONVERGED_KEPT = 4  # ... and this many more, the best
@@ -56,7 +57,8 @@ SAME_LEAF_RAD, SAME_LEAF_MM = 0.01, 0.1  # refined leaves this close are one sta
 def leaf_starts(problem, threshold):
     """Starting poses [(R, t)] from every leaf cell that may hold a pose passing ``threshold``
     (cost, mm^2), best first; ``[]`` when no pose can pass; None when the search does not apply (no
-    point or ball touches) or is not completed (more than ``MAX_CELLS`` cells: a continuum of poses)."""
+    point or ball touches) or is not completed (more than ``MAX_CELLS`` cells wider than
+    ``COARSEST_LEAF_RAD``: a continuum of poses)."""
     search = RotationSearch(problem, threshold)
     if search.problem.size < 6:  # point and ball touches that cannot fix a pose
         return None
@@ -152,7 +154,8 @@ class RotationSearch:
             ys, cost = self.best_images(a, Rs)
             keep = cost <= (self.root + delta * self.swing_mm) ** 2
             v, Rs, ys = v[keep], Rs[keep], ys[keep]
-            if delta <= LEAF_RAD or not len(v):
+            if delta <= LEAF_RAD or not len(v) or (8 * len(v) > MAX_CELLS and delta <= COARSEST_LEAF_RAD):
+                # Too many cells to split again, but small enough to refine: the leaves are these.
                 return Rs, self.centroid - (Rs @ ys[..., None])[..., 0]
             if 8 * len(v) > MAX_CELLS:
                 return None
