@@ -37,6 +37,7 @@ import numpy as np
 
 from .elements import distance_and_outward
 from .fits import sphere_centre_candidates
+from .mobility import matrix_rank
 from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
@@ -46,7 +47,8 @@ FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first le
 LEAF_RAD = 0.045  # cells are split down to this radius (rad), then refined
 TRANSLATION_STEPS = 3  # Gauss-Newton steps for the best translation of a cell
 MAX_CELLS = 250000  # cells at one level beyond which they are not split again ...
-COARSEST_LEAF_RAD = 0.09  # ... but refined as leaves when this small; else the search is not completed
+COARSEST_LEAF_RAD = 0.09  # ... but refined as leaves when this small and no more than MAX_LEAVES; else the
+MAX_LEAVES = 50000  # search is not completed
 REFINE_STEPS = 8  # batched Gauss-Newton steps from every leaf before the leaves are told apart
 REFINED_FACTOR = 4.0  # refined leaves kept: cost within this many times the residual test's threshold ...
 UNCONVERGED_KEPT = 4  # ... and this many more, the best
@@ -56,12 +58,13 @@ SAME_LEAF_RAD, SAME_LEAF_MM = 0.01, 0.1  # refined leaves this close are one sta
 
 def leaf_starts(problem, threshold):
     """Starting poses [(R, t)] from every leaf cell that may hold a pose passing ``threshold``
-    (cost, mm^2), best first; ``[]`` when no pose can pass; None when the search does not apply (no
-    point or ball touches) or is not completed (more than ``MAX_CELLS`` cells wider than
-    ``COARSEST_LEAF_RAD``: a continuum of poses)."""
+    (cost, mm^2), best first; ``[]`` when no pose can pass; None when the search does not apply (point
+    and ball touches whose rows cannot fix a pose) or is not completed (more than ``MAX_CELLS`` cells wider
+    than ``COARSEST_LEAF_RAD``, or more than ``MAX_LEAVES`` of them: a continuum of poses)."""
     search = RotationSearch(problem, threshold)
-    if search.problem.size < 6:  # point and ball touches that cannot fix a pose
-        return None
+    if search.problem.size < 6 or matrix_rank(search.problem.evaluate(np.eye(3), np.zeros(3))[1],
+                                              search.problem.scale()) < 6:
+        return None  # point and ball touches that cannot fix a pose
     leaves = search.leaves()
     if leaves is None:
         return None
@@ -154,7 +157,8 @@ class RotationSearch:
             ys, cost = self.best_images(a, Rs)
             keep = cost <= (self.root + delta * self.swing_mm) ** 2
             v, Rs, ys = v[keep], Rs[keep], ys[keep]
-            if delta <= LEAF_RAD or not len(v) or (8 * len(v) > MAX_CELLS and delta <= COARSEST_LEAF_RAD):
+            if delta <= LEAF_RAD or not len(v) or (
+                    8 * len(v) > MAX_CELLS and delta <= COARSEST_LEAF_RAD and len(v) <= MAX_LEAVES):
                 # Too many cells to split again, but small enough to refine: the leaves are these.
                 return Rs, self.centroid - (Rs @ ys[..., None])[..., 0]
             if 8 * len(v) > MAX_CELLS:
