@@ -58,12 +58,12 @@ class Solutions(list):
 
 def _search(problem, initial_pose, batch, complete):
     far = False
+    threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))  # cost, mm^2
     if initial_pose is not None:
         complete = False
         T = check_fixture2meas(initial_pose)
         starts, first_batch = [(T[:3, :3], T[:3, 3])], 1
     else:
-        threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
         starts = leaf_starts(problem, threshold) if complete else None
         complete = starts is not None
         if complete:
@@ -96,7 +96,6 @@ def _search(problem, initial_pose, batch, complete):
     weak = any(s.passes and s.admissible and s.weak for s in solutions)
     if not complete and initial_pose is None and not weak:
         # Poses that share a found pose's rotation: the one search a local search can afford everywhere.
-        threshold = problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
         for found in [s for s in solutions if s.passes and s.admissible]:
             for t in translation_starts(problem, found.rotation, found.translation, threshold):
                 known = [(s.rotation, s.translation) for s in solutions]
