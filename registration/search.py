@@ -130,10 +130,9 @@ class RotationSearch:
             self.elements.append((core, anchor, direction, offset, slice(first, first + g.count)))
             first += g.count
         # Each touch's patch box, grown by how far an admissible touch may lie off its patch and its surface.
-        boxes = {id(g.feature): patch_box(g.feature) for g in groups}
         reach = EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + self.root
-        self.low = np.concatenate([np.tile(boxes[id(g.feature)][0], (g.count, 1)) for g in groups]) - reach
-        self.high = np.concatenate([np.tile(boxes[id(g.feature)][1], (g.count, 1)) for g in groups]) + reach
+        self.low = np.concatenate([np.tile(patch_box(g.feature)[0], (g.count, 1)) for g in groups]) - reach
+        self.high = np.concatenate([np.tile(patch_box(g.feature)[1], (g.count, 1)) for g in groups]) + reach
         # Where the centroid's image starts: the mean of the touched elements' anchors, and what each
         # candidate centre of a touched sphere puts there (it fixes the translation given the rotation).
         self.anchor = np.mean([g.feature.core()[1] for g in groups], axis=0)
