@@ -1,7 +1,7 @@
-"""Issue 12's long sweep: register_touches on many seeded random layouts per case, judged against the
+"""Issues 12 and 18's long sweep: register_touches on many seeded random layouts per case, judged against the
 brute-force enumeration of admissible poses (tests/brute_force.py, tests/search_cases.py).
 
-Run by hand: ``python benchmarks/bench_search.py [--layouts 100] [--case SUBSTRING]``. Per case and noise
+Run by hand: ``python benchmarks/bench_search.py [--layouts 200] [--case SUBSTRING]``. Per case and noise
 level, one row: layouts; the engine's answers by status; its failures (a wrong ``unique``, ``unique``
 with another admissible pose, ``unique`` with none, ``ambiguous`` missing an admissible pose, a false
 ``inconsistent``, a separating touch off the part or not separating); the median and largest time of
@@ -22,6 +22,7 @@ from machine import describe  # noqa: E402
 from search_cases import VARIANTS, judge_all, variant_id  # noqa: E402
 
 FAILURES = [
+    ("search not complete (exit 6, no claim)", lambda o: o.search != "complete"),
     ("wrong unique", lambda o: o.wrong_unique),
     ("unique, missed one", lambda o: o.unique_missed),
     ("unique, none admissible", lambda o: o.unique_none),
@@ -46,7 +47,7 @@ def row(name, outcomes):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--layouts", type=int, default=100, help="random layouts per case and noise level")
+    parser.add_argument("--layouts", type=int, default=200, help="random layouts per case and noise level")
     parser.add_argument("--case", default="", help="only the cases whose name contains this")
     args = parser.parse_args()
     print(f"machine: {describe()}")

@@ -68,7 +68,7 @@ def register(
 
     Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 2 bad input.
     """
-    from fixturecad.registration.touchfile import EXIT_CODES, register_file, report, target
+    from fixturecad.registration.touchfile import exit_code, register_file, report, target
 
     if not Path(out_dir).is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
@@ -79,7 +79,7 @@ def register(
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     typer.echo(report(result, pose_format.value, as_json))
-    raise typer.Exit(EXIT_CODES[result["status"]])
+    raise typer.Exit(exit_code(result))
 
 
 @app.command()

@@ -228,3 +228,23 @@ def entry_on(entry, mode_set, coordinates):
         if key in sensor:
             sensor[key] = (R @ np.asarray(sensor[key], float)).tolist()
     return {**entry, "points": points.tolist(), "sensor": sensor}
+
+
+def largest_row_variance(tolerance, feature, points):
+    """The largest variance (mm^2), over fixture ``points`` (n, 3), of how far the feature's deviation moves
+    a touch there across its rows: along the surface normal, or off a line or a point core in every
+    direction. The search's deviation bound (:mod:`.search`) rests on it."""
+    s = tolerance.slices[feature.id]
+    m = tolerance.modes[feature.id]
+    S = tolerance.covariance[s, s]
+    points = np.asarray(points, float).reshape(-1, 3)
+    # Each mode moves the surface point p by omega x p + v, or a radius mode along the outward normal.
+    moved = np.cross(m.twists[None, :, :3], points[:, None]) + m.twists[None, :, 3:]
+    normal = feature.normal_at(points)
+    moved[:, m.radius] = normal[:, None]
+    core, _, direction, radius = feature.core()
+    if core == "plane" or radius:
+        moved = np.einsum("nki,ni->nk", moved, normal)[..., None]
+    elif core == "line":
+        moved = moved - np.einsum("nki,i->nk", moved, direction)[..., None] * direction
+    return float(np.max(np.einsum("nki,kl,nli->n", moved, S, moved), initial=0.0))

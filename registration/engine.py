@@ -99,10 +99,11 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     if best.rank < 6:
         status = "underdetermined"
         result["free_motions"] = free_motions(problem, best, features)
-    elif any(s.weak for s in good):
-        # A pose that passes but too poorly determined to tell on which patch a touch lies: no pose is claimed.
+    elif any(s.weak for s in good) or any(s.wide and s.passes and s.rank == 6 for s in solutions):
+        # A pose that passes but too poorly determined to tell on which patch a touch lies, or a region of poses
+        # that may pass wider than that: no pose is claimed.
         status = "underdetermined"
-        best = next(s for s in good if s.weak)
+        best = next(s for s in good + solutions if s.weak or (s.wide and s.passes and s.rank == 6))
         result["free_motions"] = free_motions(problem, best, features, weak=True)
     elif len(good) == 1:
         status = "unique"
@@ -161,7 +162,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "rows": problem.size,
             "rank": answer.rank,
             "redundancy": redundancy(problem, checked or answer),
-            "search": "complete" if solutions.complete else "local",
+            "search": solutions.search,
+            "search_reason": solutions.reason,
+            "search_extent_mm": solutions.extent_mm,
         }
     )
     if best is None:

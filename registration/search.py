@@ -1,258 +1,675 @@
-"""Every pose the touches admit: a branch and bound over rotations.
+"""Every pose the touches admit: a branch and bound over rotations and translations.
 
-A pose passes the residual test when its cost (the sum of its squared rows)
-is at most ``T = sigma^2 q``, q the test's chi-square quantile. Write the
-point and ball touches' fixture-frame positions as ``x_i = R^T (p_i - c) + y``:
-``c`` their measured centroid, ``y`` its image in the fixture. Every row of a
-point or ball touch is a distance of ``x_i`` from its element, so it moves by
-at most ``|x_i - x_i'|`` (1-Lipschitz), and turning ``R`` within a cell of
-geodesic radius ``delta`` (rad) about ``R0`` moves ``x_i`` by at most
-``delta rho_i``, ``rho_i = |p_i - c|``; all touches together, one turn
-``E`` of angle ``theta``, by ``sum |(E - I) b_i|^2 <= theta^2 lambda``,
-``lambda`` the largest eigenvalue of the touches' inertia tensor about ``c``
-(``sum |b|^2 I - b b^T``). So a pose of the cell that passes
-has, at ``R0`` and the same ``y``, a cost of at most
-``B = (sqrt(T) + delta sqrt(lambda))^2``: a cell whose least cost over ``y`` at
-``R0`` exceeds ``B`` holds no pose that passes and is dropped. So is a cell
-where no ``y`` brings every touch within ``sqrt(T)`` plus the admissibility
-slack (:mod:`.verdict`) plus ``delta rho_i`` of its patch's box
-(:func:`.patches.patch_box`): no pose of it is admissible. The cells left
-are split in eight until their radius is ``LEAF_RAD`` (or, past
-``MAX_CELLS``, ``COARSEST_LEAF_RAD``), and every leaf left is refined.
+A pose *passes* when its cost (the sum of its squared rows) is at most
+``T = sigma^2 q``, q the residual test's chi-square quantile. Write each point
+or ball touch's place on the fixture as ``x_i = R^T b_i + y``, ``b_i = p_i - c``
+(``c`` the touches' measured centroid, ``y`` its image on the fixture). A
+touch's rows measure the distance ``d_i(x_i)`` of ``x_i`` from its element (a
+plane, line or point core grown by a radius), and that distance is
+1-Lipschitz in ``x_i``. A cell is a box of rotation vectors (centre ``v0``,
+half-width ``w``) times a box of images ``y``. Every rotation of the cell is
+within ``delta = sqrt(3) w`` of ``R0 = exp(v0)`` (Hartley and Kahl, 2009), so
+it moves touch ``i`` by at most ``delta rho_i``, ``rho_i = |b_i|``, and all
+touches together by at most ``delta sqrt(lambda)`` in the root of the sum of
+squares (``lambda`` the largest eigenvalue of their inertia tensor). Three
+lower bounds follow for any pose of the cell, each proven in
+docs/registration.md:
 
-The least cost over ``y`` is found by Gauss-Newton from the fixture's centre
-and from every candidate centre of a touched sphere: exact (linear least
-squares) for touches on planes, lines and points; a local minimum on spheres
-and cylinders. docs/registration.md states the guarantee that follows.
+* *flat* touches (on planes, and on lines and points with no radius) have
+  rows linear in ``y``: their cost at ``R0`` is a quadratic ``q(y)`` whose
+  least value over the cell's ``y`` box is bounded below in closed form, and
+  the root of their cost at any rotation of the cell is at least
+  ``sqrt(q) - delta sqrt(lambda)``;
+* *round* touches (on spheres and cylinders, or a ball on a point or a line)
+  have a distance at least its least value over the box of ``x_i`` that the
+  cell's ``y`` box puts them in (exact for a point core, within the box's
+  half-diagonal for a line core), less ``delta rho_i``;
+* on a printed part a pose passes the residual test with the part's
+  deviations when each touch's distance, less ``e_i = sqrt(q D_i)`` (``D_i``
+  the largest variance of its feature's deviation on its patch), passes at
+  ``T``: every bound above is taken less these ``e_i``.
 
-Rotation cells are boxes of rotation vectors ``v`` (half-width ``w``): the
-geodesic angle between ``exp(v)`` and ``exp(v0)`` is at most ``|v - v0|``
-(Hartley and Kahl, 2009), so a box's radius is ``sqrt(3) w``.
+A cell whose bound exceeds ``T`` holds no pose that passes, and is dropped; so
+is a cell in which no ``y`` keeps every touch within reach of its patch's box
+(:func:`.patches.patch_box`). A cell left is split: its rotation box in eight
+while a turn moves the touches more than its ``y`` box is wide, else its
+``y`` box in two (flat touches need no split in ``y``). Splitting stops at
+cells whose turn and shift move a touch by at most ``LEAF_FRACTION sqrt(T)``.
+The leaves left, joined where they touch, are *regions*: every pose that
+passes lies in one of them. Each region's cheapest leaf, refined, is its
+pose, and the region's *extent* (how far any pose of it puts a touch from
+where that pose puts it, mm) bounds how far any other pose that passes in it
+lies from the pose found.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
 """
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
-from .elements import distance_and_outward
-from .fits import sphere_centre_candidates
+from .elements import distance_and_outward, perpendicular_basis
+from .deviations import largest_row_variance
+from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
-from .patches import patch_box
+from .patches import patch_box, patch_points
 from .pose import rotation_from_vector
 from .problem import Problem
-from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2
+from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM
 
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
-LEAF_RAD = 0.045  # cells are split down to this radius (rad), then refined
-TRANSLATION_STEPS = 3  # Gauss-Newton steps for the best translation of a cell
-MAX_CELLS = 250000  # cells at one level beyond which they are not split again ...
-COARSEST_LEAF_RAD = 0.09  # ... but refined as leaves when this small and no more than MAX_LEAVES; else the
-MAX_LEAVES = 50000  # search is not completed
-REFINE_STEPS = 8  # batched Gauss-Newton steps from every leaf before the leaves are told apart
-REFINED_FACTOR = 4.0  # refined leaves kept: cost within this many times the residual test's threshold ...
-UNCONVERGED_KEPT = 4  # ... and this many more, the best
-TRANSLATION_GRID = 5  # translation starts per axis of the fixture's box, at one rotation
-SAME_LEAF_RAD, SAME_LEAF_MM = 0.01, 0.1  # refined leaves this close are one start
+LEAF_FRACTION = 0.25  # a leaf's first-order model is off by at most this much of sqrt(T) (and the deviations) ...
+LEAF_MM = 0.05  # ... or this (mm), the larger, at first; a region whose pose does not pass is split finer
+MAX_CELLS = 150000  # cells at one level, or leaves in all, beyond which the search stops, not complete
+MAX_LEAVES = 60000
+MAX_LEVELS = 60  # splits of a cell before the search stops, not complete
+REFINE_STEPS = 10  # batched Gauss-Newton steps from each region's cheapest leaves ...
+REGION_STARTS = 4  # ... this many of them
+RESOLVE_ROUNDS = 3  # times an unsettled region is split finer before the search stops ...
+SETTLED_MM = 0.05  # ... a region being settled when its pose passes and its extent is at most this (mm)
+RANK_ROTATIONS = np.array([[0.0, 0.0, 0.0], [0.9, -0.4, 0.3], [-0.5, 1.1, 0.7]])  # rad
+CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
 
 
-def leaf_starts(problem, threshold):
-    """Starting poses [(R, t)] from every leaf cell that may hold a pose passing ``threshold``
-    (cost, mm^2), best first; ``[]`` when no pose can pass; None when the search does not apply (point
-    and ball touches whose rows cannot fix a pose) or is not completed (more than ``MAX_CELLS`` cells wider
-    than ``COARSEST_LEAF_RAD``, or more than ``MAX_LEAVES`` of them: a continuum of poses)."""
-    search = RotationSearch(problem, threshold)
-    if search.problem.size < 6 or matrix_rank(search.problem.evaluate(np.eye(3), np.zeros(3))[1],
-                                              search.problem.scale()) < 6:
-        return None  # point and ball touches that cannot fix a pose
-    leaves = search.leaves()
-    if leaves is None:
-        return None
-    return search.refined(*leaves) if len(leaves[0]) else []
+@dataclass
+class Regions:
+    """What the search found: a refined pose ``(R, t)`` per region, best first, and each region's extent
+    (mm); ``complete`` is False, with the ``reason``, when the search stopped before its leaves; ``cells``:
+    the cells kept at each level."""
+
+    poses: list = field(default_factory=list)
+    extents_mm: list = field(default_factory=list)
+    complete: bool = True
+    reason: str = ""
+    cells: list = field(default_factory=list)
 
 
-def translation_starts(problem, rotation, translation, threshold):
-    """Translations [t] other than ``translation`` at which the touches may pass at one rotation: Gauss-Newton
-    from a grid over the touched features' patch boxes, the distinct ends within ``REFINED_FACTOR`` of
-    ``threshold``, one per confidence region. A local search's second look: solutions that share a rotation
-    (Example One's two, along its edge)."""
-    boxes = [patch_box(g.feature) for g in problem.groups]
-    low, high = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
-    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
-        return []
-    axes = [np.linspace(a, b, TRANSLATION_GRID) for a, b in zip(low, high)]
-    anchors = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    # A fixture point at ``anchor`` is put where the touches' centres are: t = c - R anchor.
-    centre = np.concatenate([g.centre for g in problem.groups]).mean(axis=0)
-    ts = np.vstack([translation, centre - anchors @ rotation.T])
-    Rs = np.broadcast_to(rotation, (len(ts), 3, 3))
-    for _ in range(REFINE_STEPS):
-        r, J = problem.evaluate_batch(Rs, ts)
-        J = J[:, :, 3:]
-        A = J.transpose(0, 2, 1) @ J + 1e-9 * np.eye(3)
-        ts = ts - (Rs @ np.linalg.solve(A, J.transpose(0, 2, 1) @ r[..., None]))[..., 0]
-    r, J = problem.evaluate_batch(Rs, ts)
-    cost = np.sum(r**2, axis=1)
-    information = J.transpose(0, 2, 1) @ J / problem.sigma**2
-    # One end per confidence region, none in the given pose's own: a weak valley holds many ends.
-    chosen = [0]
-    for k in _distinct(Rs, ts, cost):
-        if k and cost[k] <= REFINED_FACTOR * threshold and all(
-                _mahalanobis(rotation, ts[j], information[j], Rs[k:k + 1], ts[k:k + 1])[0] >= SAME_POSE_CHI2
-                for j in chosen):
-            chosen.append(k)
-    return [ts[k] for k in chosen[1:]]
+def search(problem, threshold):
+    """Every region of poses of the problem's point and ball touches that may pass ``threshold`` (cost,
+    mm^2; on a printed part, ``problem.tolerance``, with the part's deviations): :class:`Regions`. Not
+    complete when the touches' rows cannot fix a pose."""
+    tree = Tree(problem, threshold)
+    if not tree.fixes_pose:
+        return Regions(complete=False, reason="the point and ball touches do not fix a pose")
+    return tree.regions()
 
 
-class RotationSearch:
+class Tree:
     """The branch and bound of the module doc over one problem's point and ball touches."""
 
     def __init__(self, problem, threshold):
         groups = [g for g in problem.groups if g.points is not None]
         self.problem = Problem(groups, problem.sigma, problem.lever)
+        self.judge = Problem(groups, problem.sigma, problem.lever, problem.tolerance)  # the test, deviations and all
+        self.root = float(np.sqrt(threshold))
         if not groups:
+            self.fixes_pose = False
             return
         self.points = np.concatenate([g.points for g in groups])
         self.centroid = self.points.mean(axis=0)
+        # Whether the rows can fix a pose: their largest rank at a few rotations (it drops at special ones),
+        # the touches' centroid on the touched patches' centre.
+        middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
+        middle = np.where(np.isfinite(middle), middle, 0.0)
+        self.fixes_pose = any(matrix_rank(self.problem.evaluate(R, self.centroid - R @ middle)[1],
+                                          self.problem.scale()) == 6 for R in rotation_from_vector(RANK_ROTATIONS))
+        if not self.fixes_pose:
+            return
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
-        # How far one radian of turn moves the touches, all together (the module doc's sqrt(lambda)).
-        self.swing_mm = float(np.sqrt(np.linalg.eigvalsh(np.sum(self.rho**2) * np.eye(3) - b.T @ b)[-1]))
-        self.root = float(np.sqrt(threshold))
-        # Each touch's element: its core, and how far off the core the touch lies at contact (a ball's
-        # centre by both radii, as its ``rho``; a point probe by the feature's radius; a ball on a point by
-        # its own radius). Its rows' squared length is the squared distance (tests/test_search.py).
-        self.elements, first = [], 0
+        self.modes(groups, problem.tolerance, threshold / problem.sigma**2)
+        # Each touch's element: its core, anchor, direction and how far off the core the touch lies at contact
+        # (a ball's centre by both radii, its ``rho``; a point probe by the feature's radius).
+        core, anchor, direction, offset, boxes = [], [], [], [], []
         for g in groups:
-            core, anchor, direction, radius = g.feature.core()
+            c, a, d, radius = g.feature.core()
             ball = np.ravel(g.sensor.geometry.get("r", 0.0)) if g.ctype.sensor == "S" else 0.0
-            offset = np.where(g.rho > 0, g.rho, radius + np.broadcast_to(ball, g.rho.shape))
-            self.elements.append((core, anchor, direction, offset, slice(first, first + g.count)))
+            core += [c] * g.count
+            anchor += [np.asarray(a, float)] * g.count
+            direction += [np.zeros(3) if d is None else np.asarray(d, float)] * g.count
+            offset += list(np.where(g.rho > 0, g.rho, radius + np.broadcast_to(ball, g.rho.shape)))
+            boxes += [patch_box(g.feature)] * g.count
+        self.core, self.anchor, self.direction = np.array(core), np.array(anchor), np.array(direction)
+        self.offset = np.array(offset, float)
+        self.flat = (self.core == "plane") | (self.offset == 0.0)
+        self.round = ~self.flat
+        # Each touch's patch box, grown by how far a touch that passes may lie off its patch: the patch's
+        # tolerance and widening, its distance off the surface, a ball's radius.
+        grow = EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + self.root + self.dev + self.offset
+        self.low = np.array([box[0] for box in boxes]) - grow[:, None]
+        self.high = np.array([box[1] for box in boxes]) + grow[:, None]
+        # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
+        # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
+        self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
+        rows = []
+        for i in np.flatnonzero(self.flat):
+            d = self.direction[i]
+            M = np.outer(d, d) if self.core[i] == "plane" else np.eye(3) - np.outer(d, d)
+            rows += [(i, m) for m in np.linalg.eigh(M)[1].T if m @ M @ m > 0.5]
+        self.row_touch = np.array([i for i, _ in rows], int)
+        self.row_unit = np.array([m for _, m in rows]).reshape(-1, 3)
+        self.H_flat = self.row_unit.T @ self.row_unit
+        self.H_flat_least = float(max(np.linalg.eigvalsh(self.H_flat)[0], 0.0))
+        bf = b[self.flat]
+        inertia = np.sum(self.rho[self.flat] ** 2) * np.eye(3) - bf.T @ bf
+        self.flat_swing = float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0)))
+        self.flat_dev = float(np.linalg.norm(self.dev[self.flat]))
+        # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
+        # axes hold its touches' distances exactly and its last needs no split for them.
+        lines = np.flatnonzero(self.round & (self.core == "line"))
+        self.Q = np.eye(3)
+        if len(lines):
+            e1, e2 = perpendicular_basis(self.direction[lines[0]])
+            self.Q = np.column_stack([e1, e2, self.direction[lines[0]]])
+        self.aligned = self.round & (self.core == "line") & np.all(
+            np.isclose(self.direction, self.Q[:, 2]) | np.isclose(self.direction, -self.Q[:, 2]), axis=1)
+        # The y box's axes a round touch's distance depends on: all three, or across an aligned axis.
+        self.relevant = np.ones(3, bool)
+        if self.round.any() and self.aligned[self.round].all():
+            self.relevant[2] = False
+
+    def modes(self, groups, tolerance, q):
+        """A printed part's deviation modes, as the first-order model carries them: ``L`` (k, k') with
+        ``L L^T`` the touched features' mode covariance S; each touch's modes' twists (n, k, 6) and radius
+        flags (n, k); each touch's deviation bound ``dev`` = ``e_i = sqrt(q D_i)`` (mm, ``D_i`` the largest
+        variance of its feature's deviation across its rows over its patch: at the patch box's corners for a
+        plane, where it is convex, on the patch grid otherwise) and ``tilt`` = the largest turn (rad) of its
+        feature that a pose that passes allows, ``sqrt(q lambda_max)`` of its turn's covariance."""
+        n = sum(g.count for g in groups)
+        self.dev, self.tilt, self.L = np.zeros(n), np.zeros(n), None
+        if tolerance is None:
+            return
+        fids = list(dict.fromkeys(g.feature.id for g in groups))
+        index = np.concatenate([np.arange(tolerance.slices[f].start, tolerance.slices[f].stop) for f in fids])
+        S = tolerance.covariance[np.ix_(index, index)]
+        h, E = np.linalg.eigh(S)
+        keep = h > 1e-12 * max(h[-1], 1e-300)
+        self.L = E[:, keep] * np.sqrt(h[keep])
+        self.mode_twists = np.zeros((n, len(index), 6))
+        self.mode_radius = np.zeros((n, len(index)), bool)
+        first, start = 0, {}
+        for f in fids:
+            start[f], first = first, first + tolerance.slices[f].stop - tolerance.slices[f].start
+        first = 0
+        for g in groups:
+            f, m = g.feature.id, tolerance.modes[g.feature.id]
+            columns = slice(start[f], start[f] + len(m.names))
+            rows = slice(first, first + g.count)
+            self.mode_twists[rows, columns] = m.twists
+            self.mode_radius[rows, columns] = m.radius
+            if g.feature.kind == "plane":
+                low, high = patch_box(g.feature)
+                points = np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
+            else:
+                points = patch_points(g.feature)
+            self.dev[rows] = np.sqrt(q * largest_row_variance(tolerance, g.feature, points))
+            turn = m.twists[:, :3]
+            s = tolerance.covariance[tolerance.slices[f], tolerance.slices[f]]
+            self.tilt[rows] = np.sqrt(q * max(np.linalg.eigvalsh(turn.T @ s @ turn)[-1], 0.0))
             first += g.count
-        # Each touch's patch box, grown by how far an admissible touch may lie off its patch and its surface.
-        reach = EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + self.root
-        self.low = np.concatenate([np.tile(patch_box(g.feature)[0], (g.count, 1)) for g in groups]) - reach
-        self.high = np.concatenate([np.tile(patch_box(g.feature)[1], (g.count, 1)) for g in groups]) + reach
-        # Where the centroid's image starts: the mean of the touched elements' anchors, and what each
-        # candidate centre of a touched sphere puts there (it fixes the translation given the rotation).
-        self.anchor = np.mean([g.feature.core()[1] for g in groups], axis=0)
-        self.spheres = sphere_centre_candidates(groups)
-        # On planes, lines and points the distances are linear in y: one step reaches the least cost.
-        self.translation_steps = TRANSLATION_STEPS if any(g.feature.core()[3] for g in groups) else 1
 
-    def leaves(self):
-        """Rotations (K, 3, 3) and translations (K, 3) of the leaf cells left, or None past ``MAX_CELLS``."""
-        w = np.pi / FIRST_CELLS
-        axis = -np.pi + w * (2 * np.arange(FIRST_CELLS) + 1)
-        v = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
-        v = v[np.linalg.norm(v, axis=1) - np.sqrt(3.0) * w <= np.pi]
-        corners = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
-        while True:
-            delta = np.sqrt(3.0) * w
-            Rs = rotation_from_vector(v)
-            a = (self.points - self.centroid) @ Rs  # R^T (p_i - c)
-            fits = self.fits_patches(a, delta)
-            v, Rs, a = v[fits], Rs[fits], a[fits]
-            ys, cost = self.best_images(a, Rs)
-            keep = cost <= (self.root + delta * self.swing_mm) ** 2
-            v, Rs, ys = v[keep], Rs[keep], ys[keep]
-            if delta <= LEAF_RAD or not len(v) or (
-                    8 * len(v) > MAX_CELLS and delta <= COARSEST_LEAF_RAD and len(v) <= MAX_LEAVES):
-                # Too many cells to split again, but small enough to refine: the leaves are these.
-                return Rs, self.centroid - (Rs @ ys[..., None])[..., 0]
-            if 8 * len(v) > MAX_CELLS:
-                return None
-            w /= 2.0
-            v = (v[:, None] + w * corners[None]).reshape(-1, 3)
+    def deviation_rows(self, unit, touch, x):
+        """How each row (unit directions (K, R, 3) of touches ``touch`` (R,) at fixture places x (K, n, 3)) moves
+        with the modes' coordinates u (``z = L u``): (K, R, k'). A mode moves its feature's surface by
+        ``omega x p + v`` (a row by minus that along it), a radius mode along the outward direction."""
+        twists = self.mode_twists[touch]  # (R, k, 6)
+        moved = np.cross(twists[None, :, :, :3], x[:, touch, None]) + twists[None, :, :, 3:]
+        change = -np.einsum("kri,krmi->krm", unit, moved)
+        change = np.where(self.mode_radius[touch][None], -1.0, change)
+        return change @ self.L
 
-    def fits_patches(self, a, delta):
-        """Whether some ``y`` puts every touch of a rotation cell near its patch box, (K,) bool: the boxes
-        each touch allows for ``y`` must meet."""
-        slack = (delta * self.rho)[None, :, None]
-        low = np.max(self.low[None] - a - slack, axis=1)
-        high = np.min(self.high[None] - a + slack, axis=1)
-        return np.all(low <= high, axis=1)
+    # --- the bounds ----------------------------------------------------------------------------------------
+
+    def cells(self, v, w, ylo, yhi):
+        """Each cell's rotation, touches at ``R0``, y box shrunk to the patches, lower bound of the cost, and its
+        first-order model (:meth:`first_order`): a :class:`Cells`."""
+        c = Cells(v, w, ylo, yhi)
+        c.delta = np.sqrt(3.0) * w
+        c.R = rotation_from_vector(v)
+        c.a = (self.points - self.centroid) @ c.R  # R0^T b_i
+        turn = c.delta[:, None] * self.rho[None]
+        # y keeps every touch within reach of its patch's box: each box about y's own axes.
+        middle = 0.5 * (self.low + self.high)[None] - c.a
+        half = (0.5 * (self.high - self.low) @ np.abs(self.Q))[None] + turn[..., None]
+        middle = middle @ self.Q
+        lo, hi = middle - half, middle + half
+        # ... and every round touch within sqrt(T), its deviation and its turn of its element: its core within
+        # that of its radius, on the axes its distance depends on.
+        if self.round.any():
+            reach = (self.offset + self.root + self.dev)[None, self.round] + turn[:, self.round]
+            core = ((self.anchor[self.round])[None] - c.a[:, self.round]) @ self.Q
+            axes = np.where(self.aligned[self.round, None], [True, True, False], True)[None]
+            lo[:, self.round] = np.where(axes, np.maximum(lo[:, self.round], core - reach[..., None]), lo[:, self.round])
+            hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + reach[..., None]), hi[:, self.round])
+        c.ylo = np.maximum(ylo, np.max(lo, axis=1))
+        c.yhi = np.minimum(yhi, np.min(hi, axis=1))
+        bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, 0.0)
+        # Zeroth order: each touch within its turn of where it is at R0.
+        if self.flat.any():
+            z = c.a[:, self.row_touch] - self.flat_anchor[self.row_touch]
+            value = np.einsum("ri,kri->kr", self.row_unit, z)
+            # q(y) = sum (value + m.y)^2 >= q_min + h |y - y*|^2 outside the box's reach of y*.
+            H_pinv = np.linalg.pinv(self.H_flat, rcond=1e-9)
+            y_star = -(value @ self.row_unit) @ H_pinv.T
+            q_min = np.sum((value + y_star @ self.row_unit.T) ** 2, axis=1)
+            y_hat = y_star @ self.Q
+            gap = np.maximum(c.ylo - y_hat, 0.0) + np.maximum(y_hat - c.yhi, 0.0)
+            root = np.sqrt(q_min + self.H_flat_least * np.sum(gap**2, axis=1)) - c.delta * self.flat_swing
+            bound = bound + np.maximum(root - self.flat_dev, 0.0) ** 2
+        if self.round.any():
+            near = self.round_least(c.a, c.ylo, c.yhi)
+            bound = bound + np.sum(np.maximum(near - turn[:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
+        self.first_order(c)
+        # The zeroth-order bound holds the cost with each distance less its deviation bound, the first-order one
+        # the test's own cost; a pose over T in the first is over it in the second (docs/registration.md).
+        c.zeroth, c.first = bound, np.maximum(np.sqrt(c.least) - c.remainder, 0.0) ** 2
+        c.bound = np.maximum(c.zeroth, c.first)
+        # The y of a pose that may pass lies in the model's ellipsoid: the box shrinks to its shadow on the box's
+        # axes (the remainders hold over the box it had).
+        W, theta, slack, held = self.ellipsoid(c)
+        centre = theta[:, 3:6] @ self.Q
+        half = np.sqrt(slack[:, None] * np.einsum("ik,nij,jk->nk", self.Q, W[:, 3:6, 3:6], self.Q))
+        c.ylo = np.where(held[:, None], np.maximum(c.ylo, centre - half), c.ylo)
+        c.yhi = np.where(held[:, None], np.minimum(c.yhi, centre + half), c.yhi)
+        c.bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, c.bound)
+        return c
+
+    def first_order(self, c):
+        """The touches' rows to first order in the cell's turn ``omega`` (``R = R0 exp(omega)``, ``|omega| <=
+        delta``) and image y: ``value + Jw.omega + m.y``, off the true rows by at most ``remainder`` (mm, the
+        root of their squares). A turn puts touch i at ``exp(-omega) a_i = a_i + a_i x omega + e_i``,
+        ``|e_i| <= (delta^2/2 + delta^3/6) rho_i``; a round touch's distance ``|s| - r`` (``s`` its offset from
+        the core) departs from its tangent by at most ``|D|^2 / (2 (|s_0| - |D|))`` over a move D. Fills
+        ``least``: a lower bound of the model's least cost over ``|omega| <= delta`` and any y (weak
+        duality: ``Q0 - b^T (A + lambda I)^-1 b - lambda delta^2`` for any lambda >= 0, y eliminated exactly),
+        and what :meth:`leaf_poses` needs."""
+        K = len(c.v)
+        kappa = (c.delta**2 / 2.0 + c.delta**3 / 6.0)[:, None] * self.rho[None]
+        unit = np.broadcast_to(self.row_unit, (K,) + self.row_unit.shape)
+        a_rows = c.a[:, self.row_touch]
+        value = np.einsum("kri,kri->kr", unit, a_rows - self.flat_anchor[self.row_touch])
+        remainder2 = np.sum(kappa[:, self.flat] ** 2, axis=1)
+        if self.round.any():
+            centre = self.box_centre(c)
+            half = 0.5 * (c.yhi - c.ylo)
+            half = np.where(self.aligned[None, self.round], np.linalg.norm(half[:, :2], axis=1)[:, None],
+                            np.linalg.norm(half, axis=1)[:, None])
+            d0, u = self.distances(c.a, centre)
+            d0, u = d0[:, self.round], u[:, self.round]
+            move = c.delta[:, None] * self.rho[self.round] + half + kappa[:, self.round]
+            core_gap = d0 + self.offset[self.round] - move  # the least |s| over the move
+            off = np.where(core_gap > 0.0, kappa[:, self.round] + move**2 / (2.0 * np.maximum(core_gap, 1e-300)), 0.0)
+            usable = (core_gap > 0.0)[..., None]
+            u = np.where(usable, u, 0.0)
+            unit = np.concatenate([unit, u], axis=1)
+            a_rows = np.concatenate([a_rows, c.a[:, self.round]], axis=1)
+            value = np.concatenate([value, np.where(usable[..., 0], d0 - np.einsum("kri,ki->kr", u, centre), 0.0)],
+                                   axis=1)
+            remainder2 = remainder2 + np.sum(off**2, axis=1)
+        # A round touch whose move may reach its core has no tangent model: the cell is no leaf.
+        c.modelled = np.all(usable[..., 0], axis=1) if self.round.any() else np.ones(K, bool)
+        Jw = np.cross(unit, a_rows)  # row j's change with omega: m . (a x omega) = (m x a) . omega
+        if self.L is not None:
+            # The part's deviations z = L u as unknowns beside y, each u held by a row sigma u (the test is
+            # min over z of |r - J_d z|^2 + sigma^2 z^T S^-1 z): the rows' change with u taken at the y box's
+            # centre, off by at most the touch's move times its feature's largest turn (and, on a round
+            # feature, by its direction's turn times its deviation bound).
+            touch = np.concatenate([self.row_touch, np.flatnonzero(self.round)])
+            centre = self.box_centre(c)
+            spread = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1)[:, None]
+            move_all = c.delta[:, None] * self.rho[None] + kappa + spread
+            off_dev = move_all[:, touch] * self.tilt[touch]
+            if self.round.any():
+                rounds = slice(len(self.row_touch), None)
+                off_dev[:, rounds] += np.where(usable[..., 0], move / np.maximum(core_gap, 1e-300), np.inf) \
+                    * self.dev[self.round]
+            remainder2 = remainder2 + np.sum(off_dev**2, axis=1)
+            Jz = self.deviation_rows(unit, touch, c.a + centre[:, None])
+            k = self.L.shape[1]
+            prior = np.broadcast_to(np.hstack([np.zeros((k, 3)), self.problem.sigma * np.eye(k)]), (K, k, 3 + k))
+            unit = np.concatenate([np.concatenate([unit, -Jz], axis=2), prior], axis=1)
+            Jw = np.concatenate([Jw, np.zeros((K, k, 3))], axis=1)
+            value = np.concatenate([value, np.zeros((K, k))], axis=1)
+        c.remainder = np.sqrt(remainder2)
+        c.H = np.broadcast_to(self.H_flat, (K, 3, 3)) if unit.shape[1:] == self.row_unit.shape else \
+            np.einsum("kri,krj->kij", unit, unit)
+        h, E = np.linalg.eigh(c.H)
+        c.H_least = np.maximum(h[:, 0], 0.0)
+        c.H_pinv = np.einsum("kij,kj,klj->kil", E, np.where(h > 1e-9 * h[:, -1:], 1.0 / np.maximum(h, 1e-300), 0.0), E)
+        c.A, c.b, c.Q0, c.Gwy, c.gy = _reduced(Jw, unit, value, c.H_pinv)
+        c.alpha, V = np.linalg.eigh(c.A)
+        c.alpha = np.maximum(c.alpha, 0.0)
+        c.V = V
+        beta2 = np.einsum("kij,ki->kj", V, c.b) ** 2
+        # Newton on the secular equation 1/|p(lambda)| = 1/delta from lambda = 0 (monotone from below).
+        lam = np.zeros(K)
+        for _ in range(8):
+            shifted = np.maximum(c.alpha + lam[:, None], 1e-90)
+            p2 = np.sum(beta2 / shifted**2, axis=1)
+            phi = 1.0 / np.sqrt(np.maximum(p2, 1e-300)) - 1.0 / c.delta
+            slope = np.sum(beta2 / shifted**3, axis=1) / np.maximum(p2, 1e-150) ** 1.5
+            with np.errstate(over="ignore", invalid="ignore"):
+                step = phi / np.maximum(slope, 1e-300)
+            # Any lambda >= 0 gives a bound: a step that does not come out finite is not taken.
+            lam = np.maximum(lam - np.where(np.isfinite(step), step, 0.0), 0.0)
+        shifted = c.alpha + lam[:, None]
+        # An axis with no curvature adds nothing without a pull along it, and leaves no bound with one.
+        terms = np.where(beta2 > 0.0, beta2 / np.where(shifted > 0.0, shifted, 1.0), 0.0)
+        terms = np.where((shifted <= 0.0) & (beta2 > 1e-30), np.inf, terms)
+        c.least = np.maximum(c.Q0 - np.sum(terms, axis=1) - lam * c.delta**2, 0.0)
+
+    def box_centre(self, c):
+        """The centres (K, 3) of the cells' y boxes, fixture frame (0 along an unbounded axis)."""
+        centre = 0.5 * (c.ylo + c.yhi)
+        return np.where(np.isfinite(centre), centre, 0.0) @ self.Q.T
+
+    def round_least(self, a, ylo, yhi):
+        """The least distance (K, r) of each round touch from its element over the box of ``x_i`` that the
+        ``y`` box puts it in: exact on a point core and on a line core along the box's last axis, within the
+        box's half-diagonal on another line core."""
+        centre, half = 0.5 * (ylo + yhi), 0.5 * (yhi - ylo)
+        rel = (a[:, self.round] - self.anchor[self.round]) @ self.Q + centre[:, None]  # on the box's axes
+        direction = self.direction[self.round] @ self.Q
+        point = self.core[self.round] == "point"
+        aligned = self.aligned[self.round]
+        # A point core (or an aligned line core, across it): the nearest and farthest points of the box.
+        across = np.where(aligned[:, None], [1.0, 1.0, 0.0], 1.0)
+        near_box = np.linalg.norm(across * np.maximum(np.abs(rel) - half[:, None], 0.0), axis=2)
+        far_box = np.linalg.norm(across * (np.abs(rel) + half[:, None]), axis=2)
+        # Another line core: the distance at the box's centre, give or take its half-diagonal.
+        perp = np.linalg.norm(rel - np.einsum("kni,ni->kn", rel, direction)[..., None] * direction, axis=2)
+        diagonal = np.linalg.norm(half, axis=1)[:, None]
+        exact = point | aligned
+        near = np.where(exact, near_box, np.maximum(perp - diagonal, 0.0))
+        far = np.where(exact, far_box, perp + diagonal)
+        r = self.offset[self.round]
+        return np.maximum(np.maximum(near - r, r - far), 0.0)
 
     def distances(self, a, ys):
         """Distances (K, n) of the touches ``a + y`` from their elements, and their outward directions."""
         x = a + ys[:, None]
         d, u = np.empty(x.shape[:2]), np.empty(x.shape)
-        for core, anchor, direction, offset, part in self.elements:
-            d[:, part], u[:, part] = distance_and_outward(core, anchor, direction, offset, x[:, part])
+        for kind in ("point", "line", "plane"):
+            part = self.core == kind
+            if part.any():
+                d[:, part], u[:, part] = distance_and_outward(kind, self.anchor[part], self.direction[part],
+                                                              self.offset[part], x[:, part])
         return d, u
 
-    def best_images(self, a, Rs):
-        """The centroid's images ``y`` (K, 3) of least cost found, and that cost (K,), at rotations (K, 3, 3)."""
-        starts = [np.broadcast_to(self.anchor, (len(a), 3))]
-        for f, ms in self.spheres:
-            # The sphere's centre f at m: R f + t = m, y = R^T (c - t) = f + R^T (c - m).
-            starts += [f + (self.centroid - m) @ Rs for m in ms]
-        best_y = best_cost = None
-        for ys in starts:
-            for _ in range(self.translation_steps):
-                d, u = self.distances(a, ys)
-                A = u.transpose(0, 2, 1) @ u + 1e-9 * np.eye(3)
-                ys = ys - np.linalg.solve(A, u.transpose(0, 2, 1) @ d[..., None])[..., 0]
-            cost = np.sum(self.distances(a, ys)[0] ** 2, axis=1)
-            if best_cost is None:
-                best_y, best_cost = ys, cost
-            else:
-                better = cost < best_cost
-                best_y[better], best_cost[better] = ys[better], cost[better]
-        return best_y, best_cost
+    def relaxed_cost(self, Rs, ts):
+        """The touches' cost (K,) at poses, each distance less its deviation bound: what must pass."""
+        a = np.einsum("kji,nj->kni", Rs, self.points - self.centroid)
+        ys = np.einsum("kji,kj->ki", Rs, self.centroid - ts)
+        return np.sum(np.maximum(np.abs(self.distances(a, ys)[0]) - self.dev, 0.0) ** 2, axis=1)
 
-    def steps(self, Rs, ts):
-        """Gauss-Newton steps (K, 6) of the fixture-frame twist from the problem's rows, and the cost (K,)."""
-        r, J = self.problem.evaluate_batch(Rs, ts)
-        A = J.transpose(0, 2, 1) @ J
-        A = A + 1e-9 * (np.trace(A, axis1=1, axis2=2)[:, None, None] + 1e-12) * np.eye(6)
-        return -np.linalg.solve(A, J.transpose(0, 2, 1) @ r[..., None])[..., 0], np.sum(r**2, axis=1)
+    # --- the search ----------------------------------------------------------------------------------------
+
+    def first_cells(self):
+        w = np.pi / FIRST_CELLS
+        axis = -np.pi + w * (2 * np.arange(FIRST_CELLS) + 1)
+        v = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+        v = v[np.linalg.norm(v, axis=1) - np.sqrt(3.0) * w <= np.pi]
+        return v, np.full(len(v), w), np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
+
+    def leaves(self, v, w, ylo, yhi, fraction, kept):
+        """The leaf cells (:class:`Cells`) grown from the given cells: split until their model's remainder is at
+        most ``fraction sqrt(T)``; the cells kept per level are added to ``kept``. None when the search stops
+        (past ``MAX_CELLS`` or ``MAX_LEVELS``), with the reason."""
+        done = []
+        for _ in range(MAX_LEVELS):
+            c = self.cells(v, w, ylo, yhi)
+            c = c.take(c.bound <= self.root**2)
+            kept.append(len(c.v))
+            leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
+            done.append(c.take(leaf))
+            c = c.take(~leaf)
+            if not len(c.v):
+                return Cells.joined(done), ""
+            # A turn that moves the touches more than the round touches' y box is wide is split first.
+            turn = c.delta * self.rho.max()
+            shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) if self.round.any() \
+                else np.zeros(len(c.v))
+            turning = turn >= shift
+            if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS or sum(len(d.v) for d in done) > MAX_LEAVES:
+                return None, f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
+            v, w, ylo, yhi = _split(c.v, c.w, c.ylo, c.yhi, turning, self.relevant)
+        return None, f"cells still wider than a leaf after {MAX_LEVELS} levels"
+
+    def regions(self):
+        kept = []
+        leaves, reason = self.leaves(*self.first_cells(), LEAF_FRACTION, kept)
+        if leaves is None:
+            return Regions(complete=False, reason=reason, cells=kept)
+        fraction = LEAF_FRACTION
+        for _ in range(RESOLVE_ROUNDS + 1):
+            found = self.found(leaves)
+            # A region is settled when its pose passes and every pose of it that may pass lies near that one
+            # (or its leaves are as fine as they get); else it may hold another pose: its leaves split finer.
+            fine = fraction * max(self.root, LEAF_MM / LEAF_FRACTION) <= LEAF_FRACTION * self.root
+            # A region whose pose fails by more than its extent can make up holds no pose that passes: the root of
+            # the cost moves by at most sqrt(n) times the largest move of a touch.
+            found = [r for r in found if np.sqrt(r.cost) - np.sqrt(len(self.rho)) * r.extent_mm <= self.root]
+            unsettled = [k for k, region in enumerate(found)
+                         if not region.passes or (region.extent_mm > SETTLED_MM and not fine)]
+            if not unsettled:
+                return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept)
+            fraction /= 4.0
+            members = np.concatenate([found[k].members for k in unsettled])
+            settled = leaves.take(~np.isin(np.arange(len(leaves.v)), members))
+            finer, reason = self.leaves(leaves.v[members], leaves.w[members], leaves.ylo[members],
+                                        leaves.yhi[members], fraction, kept)
+            if finer is None:
+                break
+            leaves = Cells.joined([settled, finer])
+        else:
+            reason = "a region may hold a pose that passes far from the one found in it"
+        return Regions([r.pose for r in found], [r.extent_mm for r in found], complete=False, reason=reason,
+                       cells=kept)
+
+    def found(self, leaves):
+        """The regions of joined leaves (:class:`Region`), best first."""
+        if not len(leaves.v):
+            return []
+        start_R, start_y, centre, reach = self.leaf_poses(leaves)
+        labels = _joined(leaves.v, leaves.w, leaves.ylo, leaves.yhi)
+        a = np.einsum("kji,nj->kni", start_R, self.points - self.centroid)
+        cost = np.sum(self.distances(a, start_y)[0] ** 2, axis=1)
+        groups = []
+        for label in np.unique(labels):
+            members = np.flatnonzero(labels == label)
+            groups.append((members[np.argsort(cost[members])[:REGION_STARTS]], members))
+        picks = np.concatenate([best for best, _ in groups])
+        Rs, ts = self.refined(start_R[picks], self.centroid - np.einsum("kij,kj->ki", start_R[picks], start_y[picks]))
+        relaxed = self.relaxed_cost(Rs, ts)
+        out, first = [], 0
+        for best, members in groups:
+            k = first + int(np.argmin(relaxed[first:first + len(best)]))
+            first += len(best)
+            R, t = Rs[k], ts[k]
+            if self.L is not None:  # refined on the test itself, the part's deviations included
+                R, t, r, _ = levenberg_marquardt(self.judge, R, t, max_iterations=REFINE_STEPS)
+            else:
+                r = self.judge.evaluate(R, t)[0]
+            # How far any pose of the region that may pass puts a touch from where the refined pose puts it.
+            x_ref = (self.points - t) @ R
+            extent = float(np.max(np.linalg.norm(centre[members] - x_ref[None], axis=2) + reach[members]))
+            out.append(Region((R, t), float(r @ r) <= self.root**2, extent, members, float(relaxed[k])))
+        out.sort(key=lambda region: region.cost)
+        return out
+
+    def ellipsoid(self, c):
+        """The first-order model's 6-D ellipsoid of (omega, y) that may pass, ``Q(theta) <= (sqrt(T) +
+        remainder + deviations)^2``: its inverse matrix W (K, 6, 6), centre theta* (K, 6), the room left
+        above the model's least value (K,, mm^2), and whether the model holds every motion (K,)."""
+        Gww = c.A + c.Gwy @ c.H_pinv @ c.Gwy.transpose(0, 2, 1)
+        G = np.block([[Gww, c.Gwy], [c.Gwy.transpose(0, 2, 1), c.H]])
+        g = np.concatenate([c.b + np.einsum("kij,kjl,kl->ki", c.Gwy, c.H_pinv, c.gy), c.gy], axis=1)
+        eig = np.linalg.eigvalsh(G)
+        held = eig[:, 0] > 1e-9 * np.maximum(eig[:, -1], 1e-300)
+        W = np.linalg.inv(np.where(held[:, None, None], G, np.eye(G.shape[1])))
+        theta = -np.einsum("kij,kj->ki", W, g)
+        beta = np.einsum("kij,ki->kj", c.V, c.b)
+        inverse = np.where(c.alpha > 1e-12 * np.maximum(c.alpha[:, -1:], 1e-300), 1.0 / np.maximum(c.alpha, 1e-300), 0.0)
+        q_min = c.Q0 - np.sum(inverse * beta**2, axis=1)
+        slack = np.maximum((self.root + c.remainder) ** 2 - q_min, 0.0)
+        return W, theta, slack, held
+
+    def leaf_poses(self, c):
+        """Each leaf's start (R, y), and where its poses that may pass put the touches: within ``reach`` (K, n)
+        mm of ``centre`` (K, n, 3). From the first-order model's 6-D ellipsoid ``Q(theta) <= (sqrt(T) +
+        remainder + deviations)^2`` about its least ``theta*`` (its image under touch i's map ``[a_i x, I]``,
+        plus twice the turn's remainder), or, where the model leaves a motion free, from the cell itself."""
+        W, theta, slack, held = self.ellipsoid(c)
+        # The start: theta* with its turn brought into the cell.
+        norm = np.linalg.norm(theta[:, :3], axis=1)
+        omega = np.where(held[:, None], theta[:, :3] * np.minimum(1.0, c.delta / np.maximum(norm, 1e-300))[:, None], 0.0)
+        start_R = c.R @ rotation_from_vector(omega)
+        box = self.box_centre(c)
+        start_y = np.where(held[:, None], theta[:, 3:6], box)
+        kappa = (c.delta**2 / 2.0 + c.delta**3 / 6.0)[:, None] * self.rho[None]
+        # Touch i at a_i + a_i x omega + y + e_i, |e_i| <= kappa_i: over the ellipsoid, within
+        # sqrt(slack lambda_max(B_i W B_i^T)) + kappa_i of its image at theta*, B_i = [a_i x, I].
+        B = np.concatenate([_skew(c.a), np.broadcast_to(np.eye(3), c.a.shape + (3,))], axis=3)  # (K, n, 3, 6)
+        spread = np.sqrt(slack[:, None] * np.linalg.eigvalsh(np.einsum("knij,kjl,knml->knim", B, W[:, :6, :6], B))[..., -1])
+        image = c.a + np.cross(c.a, theta[:, None, :3]) + theta[:, None, 3:6]
+        # Where the model leaves a motion free: the cell, every turn within delta and every y in its box.
+        whole = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1)[:, None] + c.delta[:, None] * self.rho[None]
+        centre = np.where(held[:, None, None], image, c.a + box[:, None])
+        reach = np.where(held[:, None], spread + kappa, whole)
+        return start_R, start_y, centre, reach
 
     def refined(self, Rs, ts):
-        """Leaves refined together by Gauss-Newton, then told apart: [(R, t)] one per distinct start, best
-        first. A leaf whose refinement ends far above the threshold is dropped, but for the best few."""
+        """Poses refined together by Gauss-Newton on the touches' rows: (Rs, ts)."""
         for _ in range(REFINE_STEPS):
-            step, cost = self.steps(Rs, ts)
-            # Leaves that have met follow one path from here: the best of each place goes on.
-            kept = _distinct(Rs, ts, cost)
-            Rs, ts, step = Rs[kept], ts[kept], step[kept]
+            r, J = self.problem.evaluate_batch(Rs, ts)
+            A = J.transpose(0, 2, 1) @ J
+            A = A + 1e-9 * (np.trace(A, axis1=1, axis2=2)[:, None, None] + 1e-12) * np.eye(6)
+            step = -np.linalg.solve(A, J.transpose(0, 2, 1) @ r[..., None])[..., 0]
             # The fixture-frame twist: x -> R (exp(omega) x + v) + t.
             ts = ts + (Rs @ step[:, 3:, None])[..., 0]
             Rs = Rs @ rotation_from_vector(step[:, :3])
-        r, J = self.problem.evaluate_batch(Rs, ts)
-        cost = np.sum(r**2, axis=1)
-        kept = _distinct(Rs, ts, cost)
-        near = cost[kept] <= REFINED_FACTOR * self.root**2
-        near[:UNCONVERGED_KEPT] = True  # the best few of the rest too: a slow refinement is not dropped
-        kept = kept[near]
-        # One start per confidence region: a weakly determined pose's valley holds many refined leaves.
-        information = J.transpose(0, 2, 1) @ J / self.problem.sigma**2
-        chosen, alive = [], np.ones(len(kept), bool)
-        for i, k in enumerate(kept):
-            if alive[i]:
-                chosen.append(k)
-                alive[i + 1:] &= _mahalanobis(Rs[k], ts[k], information[k], Rs[kept[i + 1:]], ts[kept[i + 1:]]) \
-                    >= SAME_POSE_CHI2
-        return [(Rs[k], ts[k]) for k in chosen]
+        return Rs, ts
 
 
-def _distinct(Rs, ts, cost):
-    """Indices of the least costly pose in each cell of a grid over (rotation matrix entries, translation),
-    cheapest first."""
-    order = np.argsort(cost)
-    keys = np.column_stack([Rs[order].reshape(-1, 9) / SAME_LEAF_RAD, ts[order] / SAME_LEAF_MM])
-    first = np.unique(np.round(keys).astype(np.int64), axis=0, return_index=True)[1]
-    return order[np.sort(first)]
+@dataclass
+class Region:
+    """Joined leaves: the pose refined from the best of them, whether it passes (each distance less its deviation
+    bound), how far any pose of the region that may pass puts a touch from where it does (mm), the leaves'
+    indices and the pose's cost (mm^2)."""
+
+    pose: tuple
+    passes: bool
+    extent_mm: float
+    members: np.ndarray
+    cost: float
 
 
-def _mahalanobis(R, t, information, Rs, ts):
-    """Squared Mahalanobis distances (K,) of poses from (R, t) under its information over the fixture-frame
-    twist; poses more than a radian away are infinitely far."""
-    E = R.T @ Rs  # R exp(omega) = R_k
+class Cells:
+    """A batch of cells: rotation-vector box centres ``v`` (K, 3), half-widths ``w`` (K,), y boxes, and what
+    :meth:`Tree.cells` fills in."""
+
+    def __init__(self, v, w, ylo, yhi):
+        self.v, self.w, self.ylo, self.yhi = v, w, ylo, yhi
+
+    def take(self, keep):
+        out = Cells.__new__(Cells)
+        for name, value in vars(self).items():
+            setattr(out, name, value[keep])
+        return out
+
+    @staticmethod
+    def joined(parts):
+        out = Cells.__new__(Cells)
+        for name in vars(parts[0]):
+            setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
+        return out
+
+
+def _skew(a):
+    """The matrices (..., 3, 3) of ``a x``: ``_skew(a) @ w = a x w``."""
+    z = np.zeros(a.shape[:-1])
+    x, y, w = a[..., 0], a[..., 1], a[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def _split(v, w, ylo, yhi, turning, relevant):
+    """Rotation boxes of ``turning`` cells in eight, the others' y boxes in two across their widest ``relevant``
+    axis."""
+    half = 0.5 * w[turning]
+    vs = (v[turning][:, None] + half[:, None, None] * CORNERS[None]).reshape(-1, 3)
+    parts = [(vs, np.repeat(half, 8), np.repeat(ylo[turning], 8, axis=0), np.repeat(yhi[turning], 8, axis=0))]
+    lo, hi = ylo[~turning], yhi[~turning]
+    rows = np.arange(len(lo))
+    axis = np.argmax(np.where(relevant, hi - lo, -1.0), axis=1)
+    middle = 0.5 * (lo + hi)[rows, axis]
+    lo2, hi1 = lo.copy(), hi.copy()
+    hi1[rows, axis] = middle
+    lo2[rows, axis] = middle
+    parts.append((np.repeat(v[~turning], 2, axis=0), np.repeat(w[~turning], 2),
+                  np.stack([lo, lo2], 1).reshape(-1, 3), np.stack([hi1, hi], 1).reshape(-1, 3)))
+    return [np.concatenate(p) for p in zip(*parts)]
+
+
+def _reduced(Jw, m, value, H_pinv):
+    """The least cost over y of linear rows ``value + Jw . omega + m . y``: ``Q0 + 2 b.omega + omega^T A omega``,
+    as (A (K, 3, 3), b (K, 3), Q0 (K,)), with ``Gwy = sum Jw m^T`` and ``gy = sum value m``. ``H_pinv``: the
+    pseudo-inverse of the rows' y block ``sum m m^T`` (the y columns' products lie in its range, so it
+    eliminates y exactly)."""
+    Gww = np.einsum("kri,krj->kij", Jw, Jw)
+    Gwy = np.einsum("kri,krj->kij", Jw, m)
+    gw = np.einsum("kri,kr->ki", Jw, value)
+    gy = np.einsum("kri,kr->ki", m, value)
+    GH = Gwy @ H_pinv
+    A = Gww - GH @ Gwy.transpose(0, 2, 1)
+    b = gw - np.einsum("kij,kj->ki", GH, gy)
+    Q0 = np.sum(value**2, axis=1) - np.einsum("ki,kij,kj->k", gy, H_pinv, gy)
+    return A, b, Q0, Gwy, gy
+
+
+def _joined(v, w, ylo, yhi):
+    """Labels (K,) of the connected groups of leaves whose rotation boxes and y boxes touch or overlap."""
+    K = len(v)
+    order = np.argsort(v[:, 0])
+    v, w, ylo, yhi = v[order], w[order], ylo[order], yhi[order]
+    # Candidates: leaves whose first rotation coordinate is near enough, found in the sorted order, a block of
+    # pairs at a time.
+    last = np.searchsorted(v[:, 0], v[:, 0] + w + w.max() + 1e-9, side="right")
+    count = last - np.arange(K)
+    ends = np.cumsum(count)
+    pairs = []
+    for lo in range(0, K, 256):
+        rows = np.arange(lo, min(lo + 256, K))
+        i = np.repeat(rows, count[rows])
+        j = i + np.arange(len(i)) - np.repeat(ends[rows] - count[rows] - (ends[lo] - count[lo]), count[rows])
+        near = np.all(np.abs(v[i] - v[j]) <= (w[i] + w[j])[:, None] + 1e-9, axis=1)
+        near &= np.all((ylo[i] <= yhi[j] + 1e-9) & (ylo[j] <= yhi[i] + 1e-9), axis=1)
+        pairs.append((i[near], j[near]))
+    i = np.concatenate([p[0] for p in pairs])
+    j = np.concatenate([p[1] for p in pairs])
+    labels = np.arange(K)
+    while True:
+        lower = labels.copy()
+        np.minimum.at(lower, i, labels[j])
+        np.minimum.at(lower, j, labels[i])
+        lower = lower[lower]  # jump to the label's own label
+        if np.array_equal(lower, labels):
+            break
+        labels = lower
+    out = np.empty(K, int)
+    out[order] = labels
+    return out
+
+
+def mahalanobis(R, t, information, Rs, ts):
+    """Squared Mahalanobis distances (K,) of poses (Rs, ts) from (R, t) under its information (6, 6) over the
+    spatial twist (rotation vector, translation) that takes (R, t) to each; poses more than a radian away are
+    infinitely far."""
+    E = Rs @ R.T  # R_k = exp(omega) R
     cos = np.clip((np.trace(E, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
     angle = np.arccos(cos)
     vee = np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], axis=1)
     omega = vee * np.where(angle < 1e-9, 0.5, angle / (2.0 * np.sin(np.maximum(angle, 1e-9))))[:, None]
-    twist = np.hstack([omega, (ts - t) @ R])  # t_k = t + R v
+    twist = np.hstack([omega, ts - E @ t])  # t_k = exp(omega) t + v
     d = np.einsum("ki,ij,kj->k", twist, information, twist)
     return np.where(angle < 1.0, d, np.inf)

@@ -38,8 +38,18 @@ from .touches import EXTRA_SENSOR_KEYS
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
 MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
-# Exit code of a registration by its status; 2 is bad input.
+# Exit code of a registration by its status; 2 is bad input, 6 a search that did not complete (:func:`exit_code`).
 EXIT_CODES = {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent": 5}
+INCOMPLETE_EXIT = 6
+
+
+def exit_code(result):
+    """The status's exit code, or ``INCOMPLETE_EXIT`` when the search stopped before it was complete: its
+    ``unique``, ``ambiguous`` or ``inconsistent`` is then the best found, not proven (``underdetermined``
+    claims no pose, and keeps its code)."""
+    if result["search"] == "incomplete" and result["status"] != "underdetermined":
+        return INCOMPLETE_EXIT
+    return EXIT_CODES[result["status"]]
 
 
 def read_touch_csv(text, feature_ids):
@@ -325,16 +335,25 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
 
 
 SEARCH_WORDS = {
-    "complete": "search: complete (every pose the touches admit was looked for)",
-    "local": "search: local (near the nominal pose or the closed-form starts only; other poses may fit)",
+    "complete": "search: complete (every pose the touches admit was looked for{extent})",
+    "nominal": "search: nominal (the pose near the nominal pose given; other poses may fit)",
+    "local": "search: local (the closed-form starts only; other poses may fit)",
+    "incomplete": "search: incomplete, {reason}: not proven (exit 6)",
 }
+
+
+def search_line(result):
+    """The report's line on how the poses were looked for."""
+    extent = result.get("search_extent_mm")
+    extent = "" if not extent else f"; any other pose that passes moves a touch by at most {extent:.3g} mm"
+    return SEARCH_WORDS[result["search"]].format(extent=extent, reason=result.get("search_reason", ""))
 
 
 def format_result(result, pose_format="matrix"):
     """A short human-readable report of a registration result, the pose in a controller's convention."""
     from .controllers import format_pose
 
-    lines = [f"status: {result['status']}", SEARCH_WORDS[result["search"]],
+    lines = [f"status: {result['status']}", search_line(result),
              f"rms residual: {result['rms_residual_mm']:.6f} mm"]
     if result["sigma_translation_mm"] is not None:
         lines.append(
@@ -409,7 +428,7 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     """Command line: ``register.py touches.csv [--json] [--format NAME]``; bad input is one line, exit 2.
 
     The exit code tells the status: 0 unique, 3 ambiguous, 4 underdetermined,
-    5 inconsistent (:data:`EXIT_CODES`).
+    5 inconsistent (:data:`EXIT_CODES`), 6 a search that did not complete (:func:`exit_code`).
     """
     from .controllers import FORMATS
 
@@ -443,7 +462,7 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     except BrokenPipeError:
         # The reader stopped (``| head``): say nothing more, and let Python's exit not complain either.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-    return EXIT_CODES[result["status"]]
+    return exit_code(result)
 
 
 def target(sigma_mm, sigma_deg):

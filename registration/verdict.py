@@ -43,6 +43,7 @@ class Solution:
     admissible: bool = True
     outside: list = field(default_factory=list)
     spread_mm: float = 0.0  # the largest of the touches' spreads (:func:`touch_spreads`)
+    wide: bool = False  # from a region of poses that may pass reaching farther than the patches' widening
 
     @property
     def weak(self):

@@ -1,87 +1,181 @@
-"""The certified search over rotations (registration/search.py): its bound holds, and no pose that passes
-is dropped."""
+"""The complete search (registration/search.py): each of its steps that can drop a pose is checked here
+against poses sampled where it claims none passes; tests/test_solution_search.py checks the whole search
+against an independent brute force."""
 
 import numpy as np
 import pytest
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
+from fixturecad.build import features_document
+from fixturecad.registration.deviations import largest_row_variance, tolerance_from_document
+from fixturecad.registration.features import features_from_json
 from fixturecad.registration.patches import patch_points
-from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector
+from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import LEAF_RAD, RotationSearch, leaf_starts
+from fixturecad.registration.search import Tree, _joined, search
+from fixturecad.registration.solve import threshold_mm2
 from fixturecad.registration.touches import build_groups
+from fixturecad.templates import make
 
 from test_registration_engine import _plan
 
-CASES = [("cube", {"top": 2, "front": 2, "left": 2}), ("v-block", None), ("inclined-plane-cylinder", None),
-         ("sphere-plate", None)]
+# Every element a point or ball touch meets: planes (cube), planes and lines (v-block's edges are not
+# touched, its grooves are planes), a cylinder (inclined plane), spheres (sphere-plate), a sphere, planes
+# and an edge (quarter-sphere); and ball tips on spheres and planes.
+CASES = [("cube", {"top": 2, "front": 2, "left": 2}, 0.0), ("v-block", None, 0.0),
+         ("inclined-plane-cylinder", None, 0.0), ("inclined-plane-cylinder", {"plane": 2, "cylinder": 4}, 0.0),
+         ("sphere-plate", None, 0.0), ("quarter-sphere", None, 0.0), ("sphere-plate", None, 3.0),
+         ("cube", None, 2.0)]
+IDS = [f"{name}{'' if counts is None else ' ' + '-'.join(map(str, counts.values()))}"
+       f"{f' ball {ball:g} mm' if ball else ''}" for name, counts, ball in CASES]
 
 
-def _layout(name, counts, rng):
+def _layout(name, counts, rng, ball=0.0):
     """Touches drawn on the template's patches (every touched feature of the default plan, or ``counts``),
-    at a random pose: (features, touches in the measurement frame, true R, t)."""
+    at a random pose, as ball centres when ``ball`` (mm): (features, touches in the measurement frame, R, t)."""
     features, plan = _plan(name, "default")
     if counts is None:
         counts = {}
         for entry in plan:
-            counts[entry["feature"]] = counts.get(entry["feature"], 0) + len(entry["points"])
+            if "sensor" not in entry:
+                counts[entry["feature"]] = counts.get(entry["feature"], 0) + len(entry["points"])
     R, t = random_rotation(rng), rng.uniform(-80, 80, 3)
     touches = {}
     for fid, count in counts.items():
         points = patch_points(features[fid])
-        touches[fid] = points[rng.choice(len(points), count, replace=False)] @ R.T + t
+        points = points[rng.choice(len(points), count, replace=False)]
+        touches[fid] = (points + ball * features[fid].normal_at(points)) @ R.T + t
     return features, touches, R, t
 
 
-@pytest.mark.parametrize("name,counts", CASES)
-def test_the_search_distances_are_the_rows(name, counts):
+def _problem(name, counts, ball, rng, printed=False):
+    features, touches, R, t = _layout(name, counts, rng, ball)
+    tolerance = None
+    if printed:
+        document = features_document(make(name))
+        tolerance = tolerance_from_document(features_from_json(document), document)
+    problem = Problem(build_groups(features, touches, ball), 0.005, tolerance=tolerance)
+    return problem, R, t
+
+
+@pytest.mark.parametrize("name,counts,ball", CASES, ids=IDS)
+def test_the_search_distances_are_the_rows(name, counts, ball):
     """One geometry: the search's distances are the lengths of the contact model's rows, touch by touch."""
     rng = np.random.default_rng(3)
-    features, touches, R, t = _layout(name, counts, rng)
-    problem = Problem(build_groups(features, touches))
-    search = RotationSearch(problem, 1.0)
+    problem, _, _ = _problem(name, counts, ball, rng)
+    tree = Tree(problem, 1.0)
     Rs = np.array([random_rotation(rng) for _ in range(4)])
     ts = rng.uniform(-50, 50, (4, 3))
     rows = problem.evaluate_batch(Rs, ts)[0]
-    a = np.einsum("kji,nj->kni", Rs, search.points - search.centroid)
-    d, _ = search.distances(a, np.einsum("kji,kj->ki", Rs, search.centroid - ts))
+    a = np.einsum("kji,nj->kni", Rs, tree.points - tree.centroid)
+    d, _ = tree.distances(a, np.einsum("kji,kj->ki", Rs, tree.centroid - ts))
     per_touch = np.stack([np.bincount(problem.row_touch, weights=r**2) for r in rows])
     assert np.allclose(d**2, per_touch, rtol=1e-9, atol=1e-9)
 
 
-@pytest.mark.parametrize("name,counts", CASES)
-def test_the_bound_holds_within_a_cell(name, counts):
-    """At a cell's centre and the same image y, the cost is at most (sqrt(cost) + delta sqrt(lambda))^2 for
-    any rotation of the cell: the inequality the pruning rests on, on random cells and rotations."""
+@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
+@pytest.mark.parametrize("name,counts,ball", CASES, ids=IDS)
+def test_the_bound_holds_within_a_cell(name, counts, ball, printed):
+    """On 300 random cells a case, most near the true pose where the bounds are tight: no pose sampled in a
+    cell (a rotation of its box, a y of its box) has a cost, each distance less its deviation bound on a
+    printed part, below the cell's lower bound. The inequality every dropped cell rests on."""
     rng = np.random.default_rng(5)
-    features, touches, R, t = _layout(name, counts, rng)
-    search = RotationSearch(Problem(build_groups(features, touches)), 1.0)
-    for _ in range(200):
-        delta = rng.uniform(0.01, 0.7)
-        v0 = rng.normal(size=3)
-        step = rng.normal(size=3)
-        v = v0 + rng.uniform(0, 1) * delta * step / np.linalg.norm(step)
-        R0, R1 = rotation_from_vector(v0), rotation_from_vector(v)
-        assert rotation_angle(R1 @ R0.T) <= delta + 1e-12  # the geodesic radius of a rotation-vector ball
-        y = rng.uniform(-30, 30, 3)
-        costs = []
-        for Rk in (R0, R1):
-            a = (search.points - search.centroid) @ Rk
-            costs.append(np.sum(search.distances(a[None], y[None])[0] ** 2))
-        assert costs[0] <= (np.sqrt(costs[1]) + delta * search.swing_mm) ** 2 + 1e-9
+    problem, R, t = _problem(name, counts, ball, rng, printed)
+    tree = Tree(problem, threshold_mm2(problem))
+    v_true = vector_from_rotation(R)
+    y_true = R.T @ (tree.centroid - t)
+    checked = 0
+    for k in range(300):
+        w = np.exp(rng.uniform(np.log(1e-3), np.log(0.4)))
+        v0 = (v_true if k % 3 else rng.uniform(-2, 2, 3)) + rng.uniform(-2 * w, 2 * w, 3)
+        half = np.exp(rng.uniform(np.log(0.01), np.log(30.0), 3))
+        centre = y_true + rng.uniform(-2, 2, 3) * half
+        # The y box is on the tree's own axes Q: y = Q y_hat.
+        lo, hi = centre @ tree.Q - half, centre @ tree.Q + half
+        cells = tree.cells(v0[None], np.array([w]), lo[None], hi[None])
+        if not np.isfinite(cells.bound[0]):
+            continue
+        samples = 16 if printed else 64
+        v = v0 + rng.uniform(-w, w, (samples, 3))
+        y = (cells.ylo[0] + rng.uniform(0, 1, (samples, 3)) * (cells.yhi[0] - cells.ylo[0])) @ tree.Q.T
+        Rs = rotation_from_vector(v)
+        a = np.einsum("kji,nj->kni", Rs, tree.points - tree.centroid)
+        d = np.abs(tree.distances(a, y)[0]) - tree.dev
+        assert np.sum(np.maximum(d, 0.0) ** 2, axis=1).min() >= cells.zeroth[0] * (1 - 1e-9) - 1e-12
+        # The first-order bound holds the test's own cost (the part's deviations marginalised on a printed part).
+        ts = tree.centroid - np.einsum("kij,kj->ki", Rs, y)
+        test = min(float(r @ r) for r in (tree.judge.evaluate(Rk, tk)[0] for Rk, tk in zip(Rs, ts)))
+        assert test >= cells.first[0] * (1 - 1e-9) - 1e-12
+        checked += 1
+    assert checked >= 40  # cells the patches and the model do not empty at once
 
 
-@pytest.mark.parametrize("name,counts", CASES)
-def test_the_true_pose_keeps_its_leaf(name, counts):
-    """Noise-free touches at a random pose and layout: a leaf is left within one leaf radius of the truth
-    (the search never drops the cell that holds a pose that passes), and its refinement starts there."""
+@pytest.mark.parametrize("name,counts,ball", CASES, ids=IDS)
+def test_the_true_pose_lies_in_a_region(name, counts, ball):
+    """Noise-free touches at random poses and layouts: the search is complete and the truth lies within the
+    extent of a region's pose (the touches it moves, at most that far), which passes."""
     for seed in range(3):
         rng = np.random.default_rng(seed)
-        features, touches, R, t = _layout(name, counts, rng)
-        problem = Problem(build_groups(features, touches))
-        search = RotationSearch(problem, problem.sigma**2 * 30.0)
-        leaves = search.leaves()
-        assert leaves is not None
-        angles = [rotation_angle(Rk @ R.T) for Rk in leaves[0]]
-        assert min(angles) <= LEAF_RAD
-        starts = leaf_starts(problem, problem.sigma**2 * 30.0)
-        assert any(rotation_angle(Rk @ R.T) < 1e-3 and np.linalg.norm(tk - t) < 0.01 for Rk, tk in starts)
+        problem, R, t = _problem(name, counts, ball, rng)
+        found = search(problem, threshold_mm2(problem))
+        assert found.complete, found.reason
+        tree = Tree(problem, 1.0)
+        moved = [np.max(np.linalg.norm((tree.points - tk) @ Rk - (tree.points - t) @ R, axis=1))
+                 for Rk, tk in found.poses]
+        assert any(m <= e for m, e in zip(moved, found.extents_mm)), (moved, found.extents_mm)
+
+
+@pytest.mark.parametrize("name", ["cube", "quarter-sphere", "inclined-plane-cylinder", "sphere-plate"])
+def test_the_deviation_bound_holds_on_the_patch(name):
+    """A feature's largest row variance, from its patch box's corners (planes) or grid, is no smaller than
+    the variance at 500 random points of its patch: the printed part's deviation bound e_i."""
+    document = features_document(make(name))
+    features = features_from_json(document)
+    tolerance = tolerance_from_document(features, document)
+    rng = np.random.default_rng(2)
+    for fid, feature in features.items():
+        if feature.kind == "plane":
+            low, high = np.array([patch_points(feature).min(0), patch_points(feature).max(0)])
+            corners = np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
+            bound = largest_row_variance(tolerance, feature, corners)
+        else:
+            bound = largest_row_variance(tolerance, feature, patch_points(feature))
+        points = patch_points(feature)
+        sample = points[rng.choice(len(points), min(500, len(points)), replace=False)]
+        inside = [largest_row_variance(tolerance, feature, p) for p in sample]
+        assert max(inside) <= bound * (1 + 1e-9) + 1e-15, fid
+
+
+def test_leaves_are_joined_as_a_graph_library_joins_them():
+    """The regions' leaves, joined where their boxes touch, are scipy's connected components."""
+    rng = np.random.default_rng(4)
+    for count in (1, 40, 900):
+        v = rng.uniform(-1, 1, (count, 3))
+        w = rng.choice([0.02, 0.05], count)
+        ylo = rng.uniform(0, 1, (count, 3))
+        yhi = ylo + rng.uniform(0, 0.5, (count, 3))
+        labels = _joined(v, w, ylo, yhi)
+        near = np.all(np.abs(v[:, None] - v[None]) <= (w[:, None] + w[None])[..., None] + 1e-9, axis=2)
+        near &= np.all((ylo[:, None] <= yhi[None] + 1e-9) & (ylo[None] <= yhi[:, None] + 1e-9), axis=2)
+        n, expected = connected_components(csr_matrix(near), directed=False)
+        assert len(np.unique(labels)) == n
+        assert all(len(set(expected[labels == label])) == 1 for label in np.unique(labels))
+
+
+def test_a_search_that_cannot_fix_a_pose_is_not_complete():
+    """Six touches at one point leave the pose free: the search says it is not complete, with the reason."""
+    features, _ = _plan("cube", "default")
+    problem = Problem(build_groups(features, {"top": np.tile([[10.0, 10.0, 50.0]], (6, 1))}))
+    found = search(problem, threshold_mm2(problem))
+    assert not found.complete and "fix" in found.reason
+
+
+def test_the_geodesic_radius_of_a_rotation_box():
+    """Every rotation of a cell is within sqrt(3) w of its centre's (Hartley and Kahl): sampled."""
+    rng = np.random.default_rng(6)
+    for _ in range(500):
+        w = rng.uniform(1e-3, 0.4)
+        v0 = rng.uniform(-2.5, 2.5, 3)
+        v = v0 + rng.uniform(-w, w, 3)
+        assert rotation_angle(rotation_from_vector(v) @ rotation_from_vector(v0).T) <= np.sqrt(3) * w + 1e-12

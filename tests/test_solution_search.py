@@ -9,7 +9,9 @@ import pytest
 
 from search_cases import VARIANTS, judge_all, variant_id
 
-LAYOUTS = 4  # per variant in the normal suite; the benchmark runs many more
+LAYOUTS = 4  # per variant in the normal suite; the benchmark runs many more ...
+ISSUE_LAYOUTS = 30  # ... and the three kinds of layout that missed poses (issue 18) this many, so that a 3 % miss
+ISSUE_CASES = ("cube 2-2-2, printed", "v-block 2-2-2, printed", "inclined-plane-cylinder 2+4, printed")  # rate fails
 CHECKS = {
     "unique with a wrong pose": ("wrong_unique",),
     "an admissible pose missed": ("unique_missed", "unique_none", "ambiguous_missing"),
@@ -22,11 +24,16 @@ CHECKS = {
 def test_never_a_confident_wrong_pose(case, noise_mm):
     """No unique with a wrong pose; unique only when the brute force finds exactly one admissible pose and
     ambiguous listing all of them; inconsistent only when it finds none; a separating touch on the real
-    part that, added, gives the true pose. Failures as {check: [(layout, status, poses found)]}."""
-    outcomes = judge_all(case, noise_mm, LAYOUTS)
+    part that, added, gives the true pose; and a search that completes on every layout (a point-touch plan
+    that fixes the pose is never left unproven). Failures as {check: [(layout, status, poses found)]}."""
+    outcomes = judge_all(case, noise_mm, ISSUE_LAYOUTS if case.name in ISSUE_CASES else LAYOUTS)
     failures = {check: [(k, o.status, o.found) for k, o in enumerate(outcomes)
                         if any(getattr(o, attribute) for attribute in attributes)]
                 for check, attributes in CHECKS.items()}
     failures["separating touch"] = [(k, o.separating) for k, o in enumerate(outcomes)
                                     if o.separating not in ("", "separates")]
+    if not case.plan:
+        # Not complete, and not underdetermined (which claims no pose, exit 4): exit 6, no claim, but no answer.
+        failures["search not complete"] = [(k, o.status) for k, o in enumerate(outcomes)
+                                           if o.search != "complete" and o.status != "underdetermined"]
     assert {check: found for check, found in failures.items() if found} == {}
