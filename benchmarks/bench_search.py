@@ -22,7 +22,7 @@ from machine import describe  # noqa: E402
 from search_cases import VARIANTS, judge_all, variant_id  # noqa: E402
 
 FAILURES = [
-    ("search not complete (exit 6, no claim)", lambda o: o.search != "complete"),
+    ("search not complete", lambda o: o.search != "complete"),
     ("wrong unique", lambda o: o.wrong_unique),
     ("unique, missed one", lambda o: o.unique_missed),
     ("unique, none admissible", lambda o: o.unique_none),

@@ -214,8 +214,9 @@ class Tree:
         with the modes' coordinates u (``z = L u``): (K, R, k'). A mode moves its feature's surface by
         ``omega x p + v`` (a row by minus that along it), a radius mode along the outward direction."""
         twists = self.mode_twists[touch]  # (R, k, 6)
-        moved = np.cross(twists[None, :, :, :3], x[:, touch, None]) + twists[None, :, :, 3:]
-        change = -np.einsum("kri,krmi->krm", unit, moved)
+        # u . (omega x p + v) = (p x u) . omega + u . v
+        change = -(np.einsum("kri,rmi->krm", np.cross(x[:, touch], unit), twists[..., :3])
+                   + np.einsum("kri,rmi->krm", unit, twists[..., 3:]))
         change = np.where(self.mode_radius[touch][None], -1.0, change)
         return change @ self.L
 
@@ -419,7 +420,9 @@ class Tree:
         done = []
         for _ in range(MAX_LEVELS):
             c = self.cells(v, w, ylo, yhi)
-            c = c.take(c.bound <= self.root**2)
+            # Every rotation has a rotation vector within pi: a box wholly beyond holds none that need looking at.
+            beyond = np.linalg.norm(np.maximum(np.abs(c.v) - c.w[:, None], 0.0), axis=1) > np.pi
+            c = c.take((c.bound <= self.root**2) & ~beyond)
             kept.append(len(c.v))
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
             done.append(c.take(leaf))
@@ -487,10 +490,9 @@ class Tree:
             k = first + int(np.argmin(relaxed[first:first + len(best)]))
             first += len(best)
             R, t = Rs[k], ts[k]
-            if self.L is not None:  # refined on the test itself, the part's deviations included
+            r = self.judge.evaluate(R, t)[0]
+            if self.L is not None and r @ r > self.root**2:  # refined on the test itself, deviations included
                 R, t, r, _ = levenberg_marquardt(self.judge, R, t, max_iterations=REFINE_STEPS)
-            else:
-                r = self.judge.evaluate(R, t)[0]
             # How far any pose of the region that may pass puts a touch from where the refined pose puts it.
             x_ref = (self.points - t) @ R
             extent = float(np.max(np.linalg.norm(centre[members] - x_ref[None], axis=2) + reach[members]))
