@@ -19,21 +19,31 @@ CHECKS = {
 }
 
 
-@pytest.mark.parametrize("case,noise_mm", [pytest.param(case, noise_mm, id=variant_id(case, noise_mm))
-                                            for case, noise_mm in VARIANTS])
-def test_never_a_confident_wrong_pose(case, noise_mm):
+BLOCK = 10  # layouts a test, so that the many layouts of a case spread over the workers
+
+
+def _blocks():
+    for case, noise_mm in VARIANTS:
+        count = ISSUE_LAYOUTS if case.name in ISSUE_CASES else LAYOUTS
+        for first in range(0, count, BLOCK):
+            name = variant_id(case, noise_mm) + (f", layouts {first}-{first + min(BLOCK, count) - 1}" if count > BLOCK else "")
+            yield pytest.param(case, noise_mm, first, min(BLOCK, count - first), id=name)
+
+
+@pytest.mark.parametrize("case,noise_mm,first,layouts", list(_blocks()))
+def test_never_a_confident_wrong_pose(case, noise_mm, first, layouts):
     """No unique with a wrong pose; unique only when the brute force finds exactly one admissible pose and
     ambiguous listing all of them; inconsistent only when it finds none; a separating touch on the real
     part that, added, gives the true pose; and a search that completes on every layout (a point-touch plan
     that fixes the pose is never left unproven). Failures as {check: [(layout, status, poses found)]}."""
-    outcomes = judge_all(case, noise_mm, ISSUE_LAYOUTS if case.name in ISSUE_CASES else LAYOUTS)
-    failures = {check: [(k, o.status, o.found) for k, o in enumerate(outcomes)
+    outcomes = judge_all(case, noise_mm, layouts, first=first)
+    failures = {check: [(first + k, o.status, o.found) for k, o in enumerate(outcomes)
                         if any(getattr(o, attribute) for attribute in attributes)]
                 for check, attributes in CHECKS.items()}
-    failures["separating touch"] = [(k, o.separating) for k, o in enumerate(outcomes)
+    failures["separating touch"] = [(first + k, o.separating) for k, o in enumerate(outcomes)
                                     if o.separating not in ("", "separates")]
     if not case.plan:
         # Not complete, and not underdetermined (which claims no pose, exit 4): exit 6, no claim, but no answer.
-        failures["search not complete"] = [(k, o.status) for k, o in enumerate(outcomes)
+        failures["search not complete"] = [(first + k, o.status) for k, o in enumerate(outcomes)
                                            if o.search != "complete" and o.status != "underdetermined"]
     assert {check: found for check, found in failures.items() if found} == {}
