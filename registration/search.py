@@ -11,35 +11,35 @@ half-width ``w``) times a box of images ``y``. Every rotation of the cell is
 within ``delta = sqrt(3) w`` of ``R0 = exp(v0)`` (Hartley and Kahl, 2009), so
 it moves touch ``i`` by at most ``delta rho_i``, ``rho_i = |b_i|``, and all
 touches together by at most ``delta sqrt(lambda)`` in the root of the sum of
-squares (``lambda`` the largest eigenvalue of their inertia tensor). Three
-lower bounds follow for any pose of the cell, each proven in
-docs/registration.md:
+squares (``lambda`` the largest eigenvalue of their inertia tensor). Two
+lower bounds of the cost follow for any pose of the cell, each proven in
+docs/registration.md (:meth:`Tree.cells`):
 
-* *flat* touches (on planes, and on lines and points with no radius) have
-  rows linear in ``y``: their cost at ``R0`` is a quadratic ``q(y)`` whose
-  least value over the cell's ``y`` box is bounded below in closed form, and
-  the root of their cost at any rotation of the cell is at least
-  ``sqrt(q) - delta sqrt(lambda)``;
-* *round* touches (on spheres and cylinders, or a ball on a point or a line)
-  have a distance at least its least value over the box of ``x_i`` that the
-  cell's ``y`` box puts them in (exact for a point core, within the box's
-  half-diagonal for a line core), less ``delta rho_i``;
-* on a printed part a pose passes the residual test with the part's
-  deviations when each touch's distance, less ``e_i = sqrt(q D_i)`` (``D_i``
-  the largest variance of its feature's deviation on its patch), passes at
-  ``T``: every bound above is taken less these ``e_i``.
+* zeroth order: *flat* touches (on planes, and on lines and points with no
+  radius) have rows linear in ``y``, so their cost at ``R0`` is a quadratic
+  whose least value over the ``y`` box is bounded below in closed form, less
+  ``delta sqrt(lambda)`` in its root; a *round* touch (a sphere, a cylinder,
+  a ball on a point or a line) is at least its least distance over the box of
+  places the ``y`` box puts it in, less ``delta rho_i``;
+* first order (:meth:`Tree.first_order`): with ``R = R0 exp(omega)`` the rows
+  are linear in ``(omega, y)`` give or take a proven remainder, ``y`` is
+  eliminated exactly, and the least value over ``|omega| <= delta`` is
+  bounded by weak duality.
 
-A cell whose bound exceeds ``T`` holds no pose that passes, and is dropped; so
-is a cell in which no ``y`` keeps every touch within reach of its patch's box
-(:func:`.patches.patch_box`). A cell left is split: its rotation box in eight
-while a turn moves the touches more than its ``y`` box is wide, else its
-``y`` box in two (flat touches need no split in ``y``). Splitting stops at
-cells whose turn and shift move a touch by at most ``LEAF_FRACTION sqrt(T)``.
-The leaves left, joined where they touch, are *regions*: every pose that
-passes lies in one of them. Each region's cheapest leaf, refined, is its
-pose, and the region's *extent* (how far any pose of it puts a touch from
-where that pose puts it, mm) bounds how far any other pose that passes in it
-lies from the pose found.
+On a printed part the zeroth order takes each distance less its deviation
+bound ``e_i``, and the first order carries the part's deviation modes as
+unknowns (:meth:`Tree.modes`). A cell whose bound exceeds ``T`` holds no pose
+that passes and is dropped; so is a cell in which no ``y`` keeps every touch
+within reach of its patch's box (:func:`.patches.patch_box`). A cell left is
+split (its rotation box in eight while a turn moves the touches more than its
+``y`` box is wide, else its ``y`` box in two) until its first-order model is
+close (``LEAF_FRACTION``). The leaves, joined where they touch, are
+*regions*: every pose that passes lies in one. A region's pose is refined
+from its cheapest leaves, and its *extent* (mm, from each leaf's model
+ellipsoid) bounds how far any pose of it that passes puts a touch from where
+that pose does; a region is split finer until its pose passes and its extent
+is small, or is dropped when its pose fails by more than its extent can make
+up (:meth:`Tree.regions`).
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
@@ -188,9 +188,8 @@ class Tree:
         self.L = E[:, keep] * np.sqrt(h[keep])
         self.mode_twists = np.zeros((n, len(index), 6))
         self.mode_radius = np.zeros((n, len(index)), bool)
-        first, start = 0, {}
-        for f in fids:
-            start[f], first = first, first + tolerance.slices[f].stop - tolerance.slices[f].start
+        sizes = [tolerance.slices[f].stop - tolerance.slices[f].start for f in fids]
+        start = dict(zip(fids, np.cumsum([0] + sizes[:-1])))
         first = 0
         for g in groups:
             f, m = g.feature.id, tolerance.modes[g.feature.id]
