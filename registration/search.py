@@ -69,6 +69,8 @@ REGION_STARTS = 4  # ... this many of them
 RESOLVE_ROUNDS = 3  # times an unsettled region is split finer before the search stops ...
 SETTLED_MM = 0.05  # ... a region being settled when its pose passes and its extent is at most this (mm)
 RANK_ROTATIONS = np.array([[0.0, 0.0, 0.0], [0.9, -0.4, 0.3], [-0.5, 1.1, 0.7]])  # rad
+CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
+BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
 
 
@@ -155,6 +157,15 @@ class Tree:
         inertia = np.sum(self.rho[self.flat] ** 2) * np.eye(3) - bf.T @ bf
         self.flat_swing = float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0)))
         self.flat_dev = float(np.linalg.norm(self.dev[self.flat]))
+        # Round touches on one core in pairs: the difference of their squared distances from it is linear in y
+        # (the circles' radical axis), a slab for y however far the box is from the core (:meth:`contract`).
+        owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])
+        pairs = [(i, j) for i in np.flatnonzero(self.round) for j in np.flatnonzero(self.round)
+                 if i < j and owner[i] == owner[j]]
+        self.pairs = np.array(pairs, int).reshape(-1, 2)
+        d = self.direction[self.pairs[:, 0]]
+        self.pair_projector = np.eye(3) - np.where((self.core[self.pairs[:, 0]] == "line")[:, None, None],
+                                                   np.einsum("pi,pj->pij", d, d), 0.0)
         # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
         # axes hold its touches' distances exactly and its last needs no split for them.
         lines = np.flatnonzero(self.round & (self.core == "line"))
@@ -224,7 +235,11 @@ class Tree:
     def cells(self, v, w, ylo, yhi):
         """Each cell's rotation, touches at ``R0``, y box shrunk to the patches, lower bound of the cost, and its
         first-order model (:meth:`first_order`): a :class:`Cells`."""
-        c = Cells(v, w, ylo, yhi)
+        return self.first_bound(self.zeroth_bound(Cells(v, w, ylo, yhi)))
+
+    def zeroth_bound(self, c):
+        """The cells' y boxes shrunk to the patches and the slabs, and ``zeroth``, their zeroth-order bound."""
+        v, w = c.v, c.w
         c.delta = np.sqrt(3.0) * w
         c.R = rotation_from_vector(v)
         c.a = (self.points - self.centroid) @ c.R  # R0^T b_i
@@ -242,8 +257,9 @@ class Tree:
             axes = np.where(self.aligned[self.round, None], [True, True, False], True)[None]
             lo[:, self.round] = np.where(axes, np.maximum(lo[:, self.round], core - reach[..., None]), lo[:, self.round])
             hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + reach[..., None]), hi[:, self.round])
-        c.ylo = np.maximum(ylo, np.max(lo, axis=1))
-        c.yhi = np.minimum(yhi, np.min(hi, axis=1))
+        c.ylo = np.maximum(c.ylo, np.max(lo, axis=1))
+        c.yhi = np.minimum(c.yhi, np.min(hi, axis=1))
+        self.contract(c, turn)
         bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, 0.0)
         # Zeroth order: each touch within its turn of where it is at R0.
         if self.flat.any():
@@ -260,10 +276,16 @@ class Tree:
         if self.round.any():
             near = self.round_least(c.a, c.ylo, c.yhi)
             bound = bound + np.sum(np.maximum(near - turn[:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
+        c.zeroth = bound
+        return c
+
+    def first_bound(self, c):
+        """The cells' first-order model and bound ``first``, ``bound`` the larger of the two, and the y boxes
+        shrunk to the model's ellipsoid."""
         self.first_order(c)
         # The zeroth-order bound holds the cost with each distance less its deviation bound, the first-order one
         # the test's own cost; a pose over T in the first is over it in the second (docs/registration.md).
-        c.zeroth, c.first = bound, np.maximum(np.sqrt(c.least) - c.remainder, 0.0) ** 2
+        c.first = np.maximum(np.sqrt(c.least) - c.remainder, 0.0) ** 2
         c.bound = np.maximum(c.zeroth, c.first)
         # The y of a pose that may pass lies in the model's ellipsoid: the box shrinks to its shadow on the box's
         # axes (the remainders hold over the box it had).
@@ -274,6 +296,47 @@ class Tree:
         c.yhi = np.where(held[:, None], np.minimum(c.yhi, centre + half), c.yhi)
         c.bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, c.bound)
         return c
+
+    def contract(self, c, turn):
+        """Shrink the cells' y boxes to the slabs every pose that passes keeps y in: each touch's distance is at
+        most ``s_i = sqrt(T) + e_i + delta rho_i`` at ``R0`` (each touch's share of the cost is at most ``T``,
+        its turn moves it at most ``delta rho_i``); a flat row ``value + m.y`` lies in ``[-s_i, s_i]``, and two
+        round touches on one core, at ``D_i in [r_i - s_i, r_i + s_i]`` from it, have ``D_i^2 - D_j^2 =
+        |P u_i|^2 - |P u_j|^2 + 2 P (u_i - u_j) . y`` (``u = a - anchor``, ``P`` the projector across the
+        core). Each slab ``l <= g.y <= u`` narrows each axis of the box to what the other axes leave (interval
+        propagation, in rounds over all slabs at once)."""
+        reach = self.root + self.dev[None] + turn  # (K, n)
+        rows = len(self.row_touch)
+        g = np.broadcast_to(self.row_unit @ self.Q, (len(c.v), rows, 3))
+        value = np.einsum("ri,kri->kr", self.row_unit, c.a[:, self.row_touch] - self.flat_anchor[self.row_touch])
+        low, high = -value - reach[:, self.row_touch], -value + reach[:, self.row_touch]
+        if len(self.pairs):
+            i, j = self.pairs.T
+            u = c.a - self.anchor[None]  # (K, n, 3)
+            Pu_i = np.einsum("pij,kpj->kpi", self.pair_projector, u[:, i])
+            Pu_j = np.einsum("pij,kpj->kpi", self.pair_projector, u[:, j])
+            near = np.maximum(self.offset[None] - reach, 0.0) ** 2
+            far = (self.offset[None] + reach) ** 2
+            constant = np.sum(Pu_i**2, axis=2) - np.sum(Pu_j**2, axis=2)
+            g = np.concatenate([g, 2.0 * (Pu_i - Pu_j) @ self.Q], axis=1)
+            low = np.concatenate([low, near[:, i] - far[:, j] - constant], axis=1)
+            high = np.concatenate([high, far[:, i] - near[:, j] - constant], axis=1)
+        if not g.shape[1]:
+            return
+        g = np.where(np.abs(g) > 1e-12, g, 0.0)
+        for _ in range(CONTRACT_ROUNDS):
+            lo, hi = np.maximum(c.ylo, -BIG_MM)[:, None], np.minimum(c.yhi, BIG_MM)[:, None]
+            t_lo, t_hi = np.minimum(g * lo, g * hi), np.maximum(g * lo, g * hi)  # (K, S, 3)
+            rest_lo = np.sum(t_lo, axis=2, keepdims=True) - t_lo
+            rest_hi = np.sum(t_hi, axis=2, keepdims=True) - t_hi
+            # g_k y_k in [low - rest_hi, high - rest_lo], divided by g_k (its ends swapped when g_k < 0).
+            with np.errstate(divide="ignore", invalid="ignore"):
+                a = (low[..., None] - rest_hi) / g
+                b = (high[..., None] - rest_lo) / g
+            new_lo = np.where(g > 0, a, np.where(g < 0, b, -np.inf))
+            new_hi = np.where(g > 0, b, np.where(g < 0, a, np.inf))
+            c.ylo = np.maximum(c.ylo, np.max(new_lo, axis=1))
+            c.yhi = np.minimum(c.yhi, np.min(new_hi, axis=1))
 
     def first_order(self, c):
         """The touches' rows to first order in the cell's turn ``omega`` (``R = R0 exp(omega)``, ``|omega| <=
@@ -299,7 +362,9 @@ class Tree:
             d0, u = d0[:, self.round], u[:, self.round]
             move = c.delta[:, None] * self.rho[self.round] + half + kappa[:, self.round]
             core_gap = d0 + self.offset[self.round] - move  # the least |s| over the move
-            off = np.where(core_gap > 0.0, kappa[:, self.round] + move**2 / (2.0 * np.maximum(core_gap, 1e-300)), 0.0)
+            with np.errstate(over="ignore"):
+                off = np.where(core_gap > 0.0, kappa[:, self.round] + move**2 / (2.0 * np.maximum(core_gap, 1e-300)),
+                               0.0)
             usable = (core_gap > 0.0)[..., None]
             u = np.where(usable, u, 0.0)
             unit = np.concatenate([unit, u], axis=1)
@@ -418,10 +483,12 @@ class Tree:
         (past ``MAX_CELLS`` or ``MAX_LEVELS``), with the reason."""
         done = []
         for _ in range(MAX_LEVELS):
-            c = self.cells(v, w, ylo, yhi)
+            # The cheap zeroth-order bound first; the first-order model only for the cells it keeps.
+            c = self.zeroth_bound(Cells(v, w, ylo, yhi))
             # Every rotation has a rotation vector within pi: a box wholly beyond holds none that need looking at.
             beyond = np.linalg.norm(np.maximum(np.abs(c.v) - c.w[:, None], 0.0), axis=1) > np.pi
-            c = c.take((c.bound <= self.root**2) & ~beyond)
+            c = self.first_bound(c.take((c.zeroth <= self.root**2) & ~beyond))
+            c = c.take(c.bound <= self.root**2)
             kept.append(len(c.v))
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
             done.append(c.take(leaf))

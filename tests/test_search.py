@@ -111,6 +111,27 @@ def test_the_bound_holds_within_a_cell(name, counts, ball, printed):
     assert checked >= 40  # cells the patches and the model do not empty at once
 
 
+@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
+@pytest.mark.parametrize("name,counts,ball", CASES, ids=IDS)
+def test_a_cell_that_holds_the_true_pose_keeps_it(name, counts, ball, printed):
+    """Noise-free touches: on 300 cells whose rotation box and y box hold the true pose, from a degree to the
+    whole turn and from 10 um to 60 mm, the y box shrunk by the patches, the slabs and the model's ellipsoid
+    still holds the truth's y, and the bound is no more than the truth's cost, 0."""
+    rng = np.random.default_rng(7)
+    problem, R, t = _problem(name, counts, ball, rng, printed)
+    tree = Tree(problem, threshold_mm2(problem))
+    v_true = vector_from_rotation(R)
+    y_true = R.T @ (tree.centroid - t) @ tree.Q
+    for _ in range(300):
+        w = np.exp(rng.uniform(np.log(0.01), np.log(np.pi)))
+        half = np.exp(rng.uniform(np.log(0.01), np.log(60.0), 3))
+        centre = y_true + rng.uniform(-1, 1, 3) * half
+        cells = tree.cells((v_true + rng.uniform(-w, w, 3))[None], np.array([w]), (centre - half)[None],
+                           (centre + half)[None])
+        assert np.all(cells.ylo[0] <= y_true + 1e-9) and np.all(y_true <= cells.yhi[0] + 1e-9)
+        assert cells.bound[0] <= 1e-12
+
+
 @pytest.mark.parametrize("name,counts,ball", CASES, ids=IDS)
 def test_the_true_pose_lies_in_a_region(name, counts, ball):
     """Noise-free touches at random poses and layouts: the search is complete and the truth lies within the
