@@ -132,19 +132,21 @@ SEPARATING_MARGIN_MM = 1.0  # a separating touch keeps this far inside its patch
 
 
 def separating_touch(features, solutions):
-    """The point touch that best tells the best candidate pose from all the others.
+    """The point touch that tells every candidate pose from every other.
 
     Over points on every feature's finite patch (:func:`.patches.patch_points`:
-    where the feature exists on the solid), the touch the best candidate
-    predicts (``point_meas_mm``) is scored by how far it would lie off that
-    feature under each other candidate; the smallest of these distances is
+    where the feature exists on the solid), the probe goes to where the best
+    candidate predicts the point (``point_meas_mm``) and meets the part near
+    the feature's closest point under whichever candidate is true; each such
+    touch is scored by how far it lies off the feature under each other
+    candidate, and the smallest of these distances, over every pair, is
     maximised (``separation_mm``). Only points that lie over the patch, at
     least ``SEPARATING_MARGIN_MM`` inside its edge, under every candidate are
     offered: whichever pose is true, the probe meets the part there.
     """
     if len(solutions) < 2:
         return None
-    a, others = solutions[0], solutions[1:]
+    a = solutions[0]
     best = None
     for feature in features.values():
         try:
@@ -152,12 +154,17 @@ def separating_touch(features, solutions):
         except ValueError:  # an empty or unbounded patch offers no touch
             continue
         meas = pts @ a.rotation.T + a.translation
+        over = np.ones(len(pts), bool)
+        touched = []  # where the probe meets the part, measurement frame, under each candidate
+        for b in solutions:
+            local = (meas - b.translation) @ b.rotation
+            over &= np.asarray(feature.contains(local, -SEPARATING_MARGIN_MM))
+            touched.append(feature.closest_point(local) @ b.rotation.T + b.translation)
         gap = np.full(len(pts), np.inf)
-        over = np.asarray(feature.contains(pts, -SEPARATING_MARGIN_MM))
-        for b in others:
-            local_b = (meas - b.translation) @ b.rotation
-            gap = np.minimum(gap, np.abs(feature.signed_distance(local_b)))
-            over &= np.asarray(feature.contains(local_b, -SEPARATING_MARGIN_MM))
+        for i, point in enumerate(touched):
+            for j, b in enumerate(solutions):
+                if i != j:
+                    gap = np.minimum(gap, np.abs(feature.signed_distance((point - b.translation) @ b.rotation)))
         gap = np.where(over, gap, -np.inf)
         k = int(np.argmax(gap))
         if np.isfinite(gap[k]) and (best is None or gap[k] > best["separation_mm"]):
