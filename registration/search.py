@@ -30,7 +30,8 @@ On a printed part the zeroth order takes each distance less its deviation
 bound ``e_i``, and the first order carries the part's deviation modes as
 unknowns (:meth:`Tree.modes`). A cell whose bound exceeds ``T`` holds no pose
 that passes and is dropped; so is a cell in which no ``y`` keeps every touch
-within reach of its patch's box (:func:`.patches.patch_box`). A cell left is
+within reach of its patch's box (:func:`.patches.patch_box`) and within the
+slabs that each touch's reach puts ``y`` in (:meth:`Tree.contract`). A cell left is
 split (its rotation box in eight while a turn moves the touches more than its
 ``y`` box is wide, else its ``y`` box in two) until its first-order model is
 close (``LEAF_FRACTION``). The leaves, joined where they touch, are
