@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from cli import assert_bad_input, run
+from solid_files import assert_the_files_hold
 from fixturecad.design.combination import for_class, parse
+from fixturecad.design.fixture import design
 from fixturecad.design.layout import best_layout, plan_problem
 from fixturecad.registration.mobility import matrix_rank
 from fixturecad.theory.catalogue import lookup
@@ -46,18 +48,25 @@ def _parsed(labels):
     return combination.contacts, combination.labels
 
 
-@pytest.mark.parametrize("contact_class", ["{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}", "{S}{S-R}{G3-R}",
-                                           "{R}{R}"])
-def test_a_designed_fixture_builds_and_registers(contact_class, tmp_path):
-    """One valid solid whose BREP carries every feature (checked by the build), features.json naming the
-    class, and the folder's register.py recovers a pose from the plan's touches made at that pose."""
-    result = run("design", "--class", contact_class, "--out", tmp_path / "fixture", cwd=tmp_path)
+SIX_BALLS = ["P/F-S/M"] * 6  # balls on stalks: their STEP once read back 6 % short
+
+
+@pytest.mark.parametrize("contact_class, args", [
+    ("{S-C}{S-C}{S-C}{S-T2}{S-T2}{S-T2}", []), ("{S}{S-R}{G3-R}", []), ("{R}{R}", []),
+    ("{S}{S-S}{S-S}{S-S}", []), ("{S-S}{S-S}{S-S}{S-S}{S-S}{S-S}", SIX_BALLS)])
+def test_a_designed_fixture_builds_and_registers(contact_class, args, tmp_path):
+    """One valid solid whose BREP carries every feature (checked by the build), its STEP, STL and 3MF
+    holding the layout's analytic volume, features.json naming the class, and the folder's register.py
+    recovers a pose from the plan's touches made at that pose."""
+    result = run("design", *(args or ["--class", contact_class]), "--out", tmp_path / "fixture", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     folder = tmp_path / "fixture"
     document = json.loads((folder / "features.json").read_text())
     assert document["template"] == "design" and document["design"]["mobility"] == 0
     assert document["contact_class"] == contact_class == document["design"]["contact_class"]
     assert set(document["design"]["combination"]) <= set(result.stdout.split())
+    combination = parse(document["design"]["combination"])
+    assert_the_files_hold(folder, design(combination, seed=document["design"]["seed"]).volume())
 
     from fixturecad.registration.pose import random_rotation
     from fixturecad.registration.synthetic import plan_touches

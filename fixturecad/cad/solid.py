@@ -33,7 +33,8 @@ def _piece_solid(piece) -> cq.Shape:
     shape = cq.Solid.makeCylinder(piece.radius, below + piece.length, start, w)
     top = cq.Vector(*piece.top)
     if piece.element == "S":
-        shape = shape.fuse(cq.Solid.makeSphere(piece.head_radius, top, angleDegrees1=-90, angleDegrees2=90))
+        # poles on the stalk's axis: the stalk meets the ball in a parallel, not across the seam
+        shape = shape.fuse(cq.Solid.makeSphere(piece.head_radius, top, w, angleDegrees1=-90, angleDegrees2=90))
     elif piece.element == "P":
         shape = shape.fuse(cq.Solid.makeCone(piece.radius, 0.0, piece.feature().point @ piece.w - piece.top @ piece.w,
                                              top, w))
