@@ -50,6 +50,8 @@ def design_body(layout) -> cq.Shape:
     """A designed fixture: the base block with every feature's piece fused on, one solid."""
     s, t = layout.size, layout.thickness
     block = cq.Solid.makeBox(s, s, t, cq.Vector(-s / 2, -s / 2, -t))
+    if not layout.pieces:  # every feature a face of the block
+        return block
     fused = block.fuse(*[_piece_solid(piece) for piece in layout.pieces]).clean()
     solids = fused.Solids()
     return solids[0] if len(solids) == 1 else fused
