@@ -151,21 +151,18 @@ def all_classes(args) -> None:
 
     found = enumerate_classes().found[:args.limit]
     tasks = [(i, item.name, item.members, args.random, args.seed) for i, item in enumerate(found)]
+    um = lambda b: "-" if b is None or b[0] is None else f"{b[0] * 1e3:7.1f} um {b[1] * 1e3:7.1f} mdeg"  # noqa: E731
+    print("class | design: default-plan bound at 5 um | best random | D design - D random | noise-free | 5 um")
     start = time.perf_counter()
     results = []
     with ProcessPoolExecutor(os.cpu_count()) as pool:
-        for number, result in enumerate(pool.map(end_to_end, tasks, chunksize=1), start=1):
-            results.append(result)
-            print(f"\rclasses {number}/{len(tasks)}", end="", file=sys.stderr, flush=True)
+        for r in pool.map(end_to_end, tasks, chunksize=1):
+            results.append(r)
+            gain = "-" if r["random_information"] is None else f"{r['information'] - r['random_information']:+.2f}"
+            print(f"{r['class']} | {um(r['bound'])} | {um(r['random_bound'])} | {gain} | {r['exact_status']} | "
+                  f"{r['noisy_status']} {r.get('error_over_bound', float('nan')):.2f} x bound"
+                  + (f" | CAD: {r['cad_error']}" if "cad_error" in r else ""), flush=True)
     wall = time.perf_counter() - start
-    print(file=sys.stderr)
-    um = lambda b: "-" if b is None or b[0] is None else f"{b[0] * 1e3:7.1f} um {b[1] * 1e3:7.1f} mdeg"  # noqa: E731
-    print("class | design: default-plan bound at 5 um | best random | D design - D random | noise-free | 5 um")
-    for r in results:
-        gain = "-" if r["random_information"] is None else f"{r['information'] - r['random_information']:+.2f}"
-        print(f"{r['class']} | {um(r['bound'])} | {um(r['random_bound'])} | {gain} | {r['exact_status']} | "
-              f"{r['noisy_status']} {r.get('error_over_bound', float('nan')):.2f} x bound"
-              + (f" | CAD: {r['cad_error']}" if "cad_error" in r else ""))
     n = len(results)
     count = lambda key: sum(bool(r.get(key)) for r in results)  # noqa: E731
     beats = sum(r["random_information"] is None or r["information"] >= r["random_information"] for r in results)

@@ -1,9 +1,10 @@
 """Where the features of a designed fixture go, and the touch plan they carry (no CAD).
 
 Fixture frame: a square base block, side ``size_mm``, its top face in z = 0
-(origin at its centre, Z up). Every fixture-side element is the head of a
-round stalk that rises from inside the block along a direction ``w`` at
-least ``MIN_ELEVATION_DEG`` above the horizon:
+(origin at its centre, Z up). Up to three planes, the most touched first, are
+the block's top, front and left faces; every other fixture-side element is
+the head of a round stalk that rises from inside the block along a direction
+``w`` at least ``MIN_ELEVATION_DEG`` above the horizon:
 
 * PL: the stalk's flat end face (normal ``w``);
 * S: a ball on the stalk's end;
@@ -14,18 +15,20 @@ least ``MIN_ELEVATION_DEG`` above the horizon:
 The stalks cross z = 0 at their feet and stay apart above it, so the solid is
 the block plus one piece per feature and its volume is exact: a cylinder cut
 obliquely by z = 0 keeps ``pi a^2`` times its axial length above the plane.
-Touch points face upwards (the sensor comes from above, the block cannot be in
-its way) and their approach rays stay clear of the other pieces.
+Touch points on pieces face upwards (the sensor comes from above, the block
+cannot be in its way) and their approach rays stay clear of the other pieces;
+those on the block's sides are approached from outside it.
 
-The touch plan holds one touch per contact; its mobility at the real
+The minimal touch plan holds one touch per contact; its mobility at the real
 geometry is the rank of the contact model's rows
-(:mod:`fixturecad.registration.problem`). Among seeded random layouts the one
-whose plan carries the most information (the smallest singular value of the
-scaled Jacobian) is kept.
+(:mod:`fixturecad.registration.problem`). Among seeded random layouts that
+locate, the one whose default plan carries the most information (the D
+criterion of ``fixturecad plan``) is kept and then refined by nudging one
+piece at a time (:func:`refined`).
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -175,7 +178,7 @@ class Layout:
     pieces: list
     touches: list  # touch-plan entries (templates.base.touch form): one per contact
     checks: list  # a second touch of each contact elsewhere on its feature: what makes the pose unique
-    faces: dict = None  # block face -> the id of the combination's plane on it
+    faces: dict = field(default_factory=dict)  # block face -> the id of the combination's plane on it
     margin: float = 0.0
     mobility: int = 6
     information: float = -math.inf  # log det of the default plan's scaled information (the D criterion)
@@ -186,7 +189,7 @@ class Layout:
 
     def face_ids(self) -> dict:
         """Block face -> feature id: a plane of the combination's, or the datum's own name."""
-        return {face: (self.faces or {}).get(face, f"datum_{face}") for face in BLOCK_FACES}
+        return {face: self.faces.get(face, f"datum_{face}") for face in BLOCK_FACES}
 
     def block_features(self) -> list:
         """The block's top, front and left faces as planes, their whole rectangles the patches."""
@@ -277,8 +280,8 @@ def touch_spot(piece: Piece, index: int, count: int) -> tuple[np.ndarray, np.nda
         normal = math.cos(tilt) * w + math.sin(tilt) * (math.cos(turn) * e1 + math.sin(turn) * e2)
         return piece.top + piece.head_radius * normal, normal
     if piece.element == "C":
-        # spread round the boss as far as the approach still climbs, and along it: the touches alternate
-        # sides and walk the golden-ratio sequence from its foot to its end
+        # spread round the boss as far as the approach still climbs, and along it by the golden-ratio
+        # sequence from its foot to its end
         up = _upward(w)
         side = math.acos(min(1.0, 1.5 * MIN_APPROACH_Z / up[2]))
         normal = _rotate(up, w, side * math.cos(turn))
