@@ -17,6 +17,8 @@ from fixturecad.cad.mesh import labelled_mesh, write_stl
 from fixturecad.preview import INERT_COLOUR, rgb
 
 FORMATS = (".step", ".stp", ".stl", ".3mf")
+# How far the STEP's solid, read back, may stray from the kernel's in volume (relative).
+STEP_VOLUME_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,40 @@ def _write_step(shape, path, name, features) -> None:
     writer.SetColorMode(True)
     if not writer.Transfer(document, STEPControl_AsIs) or writer.Write(str(path)) != IFSelect_RetDone:
         raise RuntimeError(f"the STEP writer failed on {path.name}")
+    check_step(path, shape.Volume())
+
+
+def read_step(path):
+    """The shape of a STEP file as the plain reader (not the XCAF one that wrote it) rebuilds it."""
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_Reader
+
+    reader = STEPControl_Reader()
+    if reader.ReadFile(str(path)) != IFSelect_RetDone or not reader.TransferRoots():
+        raise RuntimeError(f"{path.name} does not read back")
+    return reader.OneShape()
+
+
+def check_step(path, volume_mm3) -> None:
+    """RuntimeError unless the STEP reads back as one valid solid of ``volume_mm3``: a reader rebuilds
+    each face from its bounding wires, and a wire it misreads (a face across a sphere's seam) turns the
+    face inside out in the file while the kernel's solid is right."""
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+    from OCP.TopAbs import TopAbs_SOLID
+    from OCP.TopExp import TopExp_Explorer
+
+    shape = read_step(path)
+    solids, explorer = 0, TopExp_Explorer(shape, TopAbs_SOLID)
+    while explorer.More():
+        solids, _ = solids + 1, explorer.Next()
+    properties = GProp_GProps()
+    BRepGProp.VolumeProperties_s(shape, properties)
+    if solids != 1 or not BRepCheck_Analyzer(shape).IsValid():
+        raise RuntimeError(f"{path.name} does not read back as one valid solid ({solids} solids)")
+    if abs(properties.Mass() - volume_mm3) > STEP_VOLUME_TOLERANCE * volume_mm3:
+        raise RuntimeError(f"{path.name} reads back as {properties.Mass():.1f} mm^3, the solid holds {volume_mm3:.1f}")
 
 
 def _write_3mf(path, vertices, faces, owner, name, features) -> None:

@@ -33,7 +33,8 @@ def _piece_solid(piece) -> cq.Shape:
     shape = cq.Solid.makeCylinder(piece.radius, below + piece.length, start, w)
     top = cq.Vector(*piece.top)
     if piece.element == "S":
-        shape = shape.fuse(cq.Solid.makeSphere(piece.head_radius, top, angleDegrees1=-90, angleDegrees2=90))
+        # poles on the stalk's axis: the stalk meets the ball in a parallel, not across the seam
+        shape = shape.fuse(cq.Solid.makeSphere(piece.head_radius, top, w, angleDegrees1=-90, angleDegrees2=90))
     elif piece.element == "P":
         shape = shape.fuse(cq.Solid.makeCone(piece.radius, 0.0, piece.feature().point @ piece.w - piece.top @ piece.w,
                                              top, w))
@@ -49,6 +50,8 @@ def design_body(layout) -> cq.Shape:
     """A designed fixture: the base block with every feature's piece fused on, one solid."""
     s, t = layout.size, layout.thickness
     block = cq.Solid.makeBox(s, s, t, cq.Vector(-s / 2, -s / 2, -t))
+    if not layout.pieces:  # every feature a face of the block
+        return block
     fused = block.fuse(*[_piece_solid(piece) for piece in layout.pieces]).clean()
     solids = fused.Solids()
     return solids[0] if len(solids) == 1 else fused

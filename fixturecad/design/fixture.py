@@ -12,13 +12,12 @@ import numpy as np
 
 from fixturecad.errors import InputError
 from fixturecad.registration.datums import DatumScheme
-from fixturecad.registration.features import Extent, Plane
 from fixturecad.registration.motions import free_motions
 from fixturecad.design import DEFAULT_BALL_MM, DEFAULT_SIZE_MM, DESIGN_SEED
 from fixturecad.design.combination import Combination
 from fixturecad.design.layout import (LAYOUT_TRIALS, MIN_SIZE_MM, Layout, best_layout, layout_plan, plan_problem,
                                       rim_points)
-from fixturecad.templates.base import Param, Plan, Template, box_halfspaces, touch
+from fixturecad.templates.base import Param, Plan, Template, touch
 
 
 
@@ -33,13 +32,15 @@ class Design(Template):
     )
     FRAME = ("origin at the centre of the base block's top face, Z up out of it, X and Y along its edges; "
              "each feature stands on a stalk rising from that face")
-    DATUMS = DatumScheme("planes", ("datum_top", "datum_front", "datum_left"))
+    DATUMS = DatumScheme("planes", ("datum_top", "datum_front", "datum_left"))  # named after the planes on them
     DATUM_TEXT = ("primary the block's top face (Z, and the tilts about X and Y), secondary its front face (Y, and "
                   "the turn about Z), tertiary its left face (X): the origin is that corner moved to the top face's centre")
     VIEW_DIRECTIONS = ((0.6, -1.0, 1.2), (-0.8, 0.7, 1.0))
 
     def __init__(self, combination: Combination, layout: Layout, seed: int, **values):
         self.combination, self.layout, self.seed = combination, layout, seed
+        faces = layout.face_ids()
+        self.DATUMS = DatumScheme("planes", (faces["top"], faces["front"], faces["left"]))
         super().__init__(**values)
         self.contact_class = combination.contact_class
 
@@ -58,24 +59,16 @@ class Design(Template):
     def body_volume(self) -> float:
         return self.layout.volume()
 
-    def datum_features(self) -> list:
-        s, t = self.size, self.layout.thickness
-        low, high = np.array([-s / 2, -s / 2, -t]), np.array([s / 2, s / 2, 0.0])
-        return [
-            Plane("datum_top", [0, 0, 0], [0, 0, 1], Extent(halfspaces=box_halfspaces(low, high, 2))),
-            Plane("datum_front", [0, -s / 2, -t / 2], [0, -1, 0], Extent(halfspaces=box_halfspaces(low, high, 1))),
-            Plane("datum_left", [-s / 2, 0, -t / 2], [-1, 0, 0], Extent(halfspaces=box_halfspaces(low, high, 0))),
-        ]
-
     def features(self) -> list:
-        return self.layout.features() + self.datum_features()
+        return self.layout.features()
 
     def touch_plans(self) -> dict:
         s, t = self.size, self.layout.thickness
+        faces = self.layout.face_ids()
         probe = [
-            touch("P/F-PL/M", "datum_top", rim_points(s)),
-            touch("P/F-PL/M", "datum_front", [[-0.4 * s, -s / 2, -t / 2], [0.4 * s, -s / 2, -t / 2]]),
-            touch("P/F-PL/M", "datum_left", [-s / 2, 0, -t / 2]),
+            touch("P/F-PL/M", faces["top"], rim_points(s)),
+            touch("P/F-PL/M", faces["front"], [[-0.4 * s, -s / 2, -t / 2], [0.4 * s, -s / 2, -t / 2]]),
+            touch("P/F-PL/M", faces["left"], [-s / 2, 0, -t / 2]),
         ]
         tokens = " ".join(self.combination.tokens())
         return {

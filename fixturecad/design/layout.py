@@ -1,9 +1,10 @@
 """Where the features of a designed fixture go, and the touch plan they carry (no CAD).
 
 Fixture frame: a square base block, side ``size_mm``, its top face in z = 0
-(origin at its centre, Z up). Every fixture-side element is the head of a
-round stalk that rises from inside the block along a direction ``w`` at
-least ``MIN_ELEVATION_DEG`` above the horizon:
+(origin at its centre, Z up). Up to three planes, the most touched first, are
+the block's top, front and left faces; every other fixture-side element is
+the head of a round stalk that rises from inside the block along a direction
+``w`` at least ``MIN_ELEVATION_DEG`` above the horizon:
 
 * PL: the stalk's flat end face (normal ``w``);
 * S: a ball on the stalk's end;
@@ -14,18 +15,20 @@ least ``MIN_ELEVATION_DEG`` above the horizon:
 The stalks cross z = 0 at their feet and stay apart above it, so the solid is
 the block plus one piece per feature and its volume is exact: a cylinder cut
 obliquely by z = 0 keeps ``pi a^2`` times its axial length above the plane.
-Touch points face upwards (the sensor comes from above, the block cannot be in
-its way) and their approach rays stay clear of the other pieces.
+Touch points on pieces face upwards (the sensor comes from above, the block
+cannot be in its way) and their approach rays stay clear of the other pieces;
+those on the block's sides are approached from outside it.
 
-The touch plan holds one touch per contact; its mobility at the real
+The minimal touch plan holds one touch per contact; its mobility at the real
 geometry is the rank of the contact model's rows
-(:mod:`fixturecad.registration.problem`). Among seeded random layouts the one
-whose plan carries the most information (the smallest singular value of the
-scaled Jacobian) is kept.
+(:mod:`fixturecad.registration.problem`). Among seeded random layouts that
+locate, the one whose default plan carries the most information (the D
+criterion of ``fixturecad plan``) is kept and then refined by nudging one
+piece at a time (:func:`refined`).
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -36,6 +39,9 @@ from fixturecad.registration.mobility import matrix_rank
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.synthetic import plan_touches
 from fixturecad.registration.touches import build_groups, laid_sensor
+from fixturecad.registration.planning import criterion_values
+from fixturecad.registration.uncertainty import cramer_rao_bound, sigmas
+from fixturecad.templates.base import box_halfspaces
 
 MIN_ELEVATION_DEG = 45.0  # stalks rise at least this steeply: seen from above, printed without support
 MIN_APPROACH_Z = 0.15  # a touch's outward normal climbs at least this much: the sensor comes from above
@@ -45,14 +51,29 @@ STALK_RADIUS = {"PL": 0.07, "S": 0.04, "C": 0.05, "L": 0.06, "P": 0.05}  # of th
 SHARED_PLANE_RADIUS = 0.12  # of the size: a face touched several times gets a wider disc
 BALL_RADIUS = 0.1  # of the size
 HEAD_LENGTH = 0.22  # axial length of a stalk above the base top, of the size
+BALL_TILT_DEG = 50.0  # touches on a ball this far from its stalk's direction (half that for a lone touch)
+GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # steps of a sequence that fills an interval evenly
+MAX_GROWTH = 2.5  # pieces' radii are drawn up to this many times the sizes above
+MAX_LENGTH_GROWTH = 5.0  # and their lengths up to this many times
 FOOT_RING = 0.28  # feet on a circle of this radius, of the size
 ROOF_HALF_ANGLE_DEG = 45.0  # a chisel's roof faces leave its ridge this far from the stalk direction
 CONE_HEIGHT = 1.0  # a cone tip's height, of its stalk radius
 MIN_SIZE_MM = 20.0
-LAYOUTS_COMPARED = 16  # locating layouts a design chooses the best of
+LAYOUTS_COMPARED = 64  # locating layouts a design chooses the best of
 LAYOUT_TRIALS = 400  # random layouts tried at most
+REFINE_STEPS = 150  # nudges tried on the best random layout
+NUDGE = 0.03  # a nudge's standard deviation: of the size for feet, relative for radii and lengths
+NUDGE_RAD = 0.08  # and for directions and phases
+MAX_STALK_OF_BALL = 0.8  # a ball's stalk is at most this fraction of its radius
 MIN_MARGIN = 1e-3  # smallest normalised singular value of the plan's Jacobian a design accepts
 FEATURE_NAMES = {"PL": "face", "S": "ball", "C": "boss", "L": "edge", "P": "tip"}
+# The block's own faces a plane of the combination takes, most touched first: as far apart and as
+# large as the block allows (the datum faces, named datum_<face> when no plane takes them).
+BLOCK_FACES = {"top": 2, "front": 1, "left": 0}  # face -> the axis of its normal
+BLOCK_NORMALS = {"top": (0.0, 0.0, 1.0), "front": (0.0, -1.0, 0.0), "left": (-1.0, 0.0, 0.0)}
+# Touch spots on a block face, as fractions of its half-sides, spread first: corners, then edge middles.
+TOP_SPOTS = ((-1, -1), (1, -1), (-1, 1), (1, 1), (0, -1), (-1, 0), (1, 0), (0, 1))
+SIDE_SPOTS = ((-1, 0.0), (1, 0.0), (-1, 0.6), (1, -0.6), (-1, -0.6), (1, 0.6), (0, 0.6), (0, -0.6))
 
 
 @dataclass
@@ -67,6 +88,7 @@ class Piece:
     length: float
     ridge: np.ndarray | None = None  # a chisel's ridge direction (perpendicular to w)
     head_radius: float = 0.0  # a ball's radius
+    phase: float = 0.0  # rad: where round the feature its touches start (they spread evenly from there)
 
     @property
     def top(self) -> np.ndarray:
@@ -156,15 +178,29 @@ class Layout:
     pieces: list
     touches: list  # touch-plan entries (templates.base.touch form): one per contact
     checks: list  # a second touch of each contact elsewhere on its feature: what makes the pose unique
+    faces: dict = field(default_factory=dict)  # block face -> the id of the combination's plane on it
     margin: float = 0.0
     mobility: int = 6
+    information: float = -math.inf  # log det of the default plan's scaled information (the D criterion)
 
     @property
     def thickness(self) -> float:
         return BASE_THICKNESS * self.size
 
+    def face_ids(self) -> dict:
+        """Block face -> feature id: a plane of the combination's, or the datum's own name."""
+        return {face: self.faces.get(face, f"datum_{face}") for face in BLOCK_FACES}
+
+    def block_features(self) -> list:
+        """The block's top, front and left faces as planes, their whole rectangles the patches."""
+        s, t = self.size, self.thickness
+        low, high = np.array([-s / 2, -s / 2, -t]), np.array([s / 2, s / 2, 0.0])
+        return [Plane(fid, _face_point(face, s, t), BLOCK_NORMALS[face],
+                      Extent(halfspaces=box_halfspaces(low, high, BLOCK_FACES[face])))
+                for face, fid in self.face_ids().items()]
+
     def features(self) -> list:
-        return [piece.feature() for piece in self.pieces]
+        return [piece.feature() for piece in self.pieces] + self.block_features()
 
     def volume(self) -> float:
         return self.size**2 * self.thickness + sum(piece.volume() for piece in self.pieces)
@@ -179,6 +215,20 @@ def plan_problem(features, entries) -> Problem:
 def plan_jacobian(features, entries) -> np.ndarray:
     """The twist Jacobian (m, 6) of a touch plan at its nominal pose: the contact model's rows."""
     return plan_problem(features, entries).sensor_rows(np.eye(3), np.zeros(3))[1]
+
+
+def plan_bound(features, entries) -> tuple:
+    """The Cramer-Rao bound of a plan at its nominal pose with the default touch noise (5 um): RMS
+    translation (mm) and rotation (deg) standard deviations, None each when it does not locate."""
+    problem = plan_problem(features, entries)
+    return sigmas(cramer_rao_bound(problem, np.eye(4), problem.sigma))
+
+
+def plan_information(features, entries, length_mm) -> float:
+    """The D criterion of a plan as ``fixturecad plan`` takes it: log det of its rows' information with
+    rotations scaled by ``length_mm`` (-inf when it does not locate)."""
+    J = plan_jacobian(features, entries) * np.array([1.0 / length_mm] * 3 + [1.0] * 3)
+    return float(criterion_values(J.T @ J, "d"))
 
 
 def plan_mobility(features, entries, length_mm) -> tuple[int, float]:
@@ -214,11 +264,11 @@ def _upward(axis) -> np.ndarray:
     return _unit(up - (up @ axis) * axis)
 
 
-def touch_spot(piece: Piece, index: int, count: int, rng) -> tuple[np.ndarray, np.ndarray]:
-    """The ``index``-th of ``count`` touch points on a piece's feature and the outward normal there."""
+def touch_spot(piece: Piece, index: int, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``index``-th of ``count`` touch points on a piece's feature and the outward normal there, spread
+    evenly round it from the piece's phase."""
     w = piece.w
-    phase = rng.uniform(0, 2 * math.pi)
-    turn = phase + 2 * math.pi * index / count
+    turn = piece.phase + 2 * math.pi * index / count
     if piece.element == "PL":
         e1, e2 = perpendicular_basis(w)
         spread = 0.65 * piece.radius if count > 1 else 0.3 * piece.radius
@@ -226,19 +276,42 @@ def touch_spot(piece: Piece, index: int, count: int, rng) -> tuple[np.ndarray, n
     if piece.element == "S":
         # within 55 deg of the stalk's end direction, never on its underside
         e1, e2 = perpendicular_basis(w)
-        tilt = math.radians(rng.uniform(15.0, 55.0)) if count > 1 else math.radians(rng.uniform(0.0, 45.0))
+        tilt = math.radians(BALL_TILT_DEG if count > 1 else BALL_TILT_DEG / 2)
         normal = math.cos(tilt) * w + math.sin(tilt) * (math.cos(turn) * e1 + math.sin(turn) * e2)
         return piece.top + piece.head_radius * normal, normal
     if piece.element == "C":
+        # spread round the boss as far as the approach still climbs, and along it by the golden-ratio
+        # sequence from its foot to its end
         up = _upward(w)
-        normal = _rotate(up, w, math.radians(rng.uniform(-50.0, 50.0)))
-        lo = piece.boss_start() + 0.1 * (piece.length - piece.boss_start())
-        t = lo + (0.25 + 0.6 * (index + rng.uniform(0, 1)) / count) * (piece.length - lo)
-        return piece.foot + min(t, piece.length - 0.05 * piece.length) * w + piece.radius * normal, normal
+        side = math.acos(min(1.0, 1.5 * MIN_APPROACH_Z / up[2]))
+        normal = _rotate(up, w, side * math.cos(turn))
+        lo = piece.boss_start() + 0.05 * (piece.length - piece.boss_start())
+        t = lo + (index * GOLDEN % 1.0) * 0.9 * (piece.length - lo)
+        return piece.foot + t * w + piece.radius * normal, normal
     if piece.element == "L":
-        s = (-0.6 + 1.2 * (index + 0.5) / count + rng.uniform(-0.1, 0.1)) * piece.radius
+        s = (-0.6 + 1.2 * (index + 0.5) / count) * piece.radius
         return piece.top + s * piece.ridge, w
     return piece.feature().point, w
+
+
+def _face_point(face, size, thickness) -> np.ndarray:
+    """The middle of a block face, mm."""
+    return {"top": np.zeros(3), "front": np.array([0.0, -size / 2, -thickness / 2]),
+            "left": np.array([-size / 2, 0.0, -thickness / 2])}[face]
+
+
+def face_spot(face, index, size, thickness) -> tuple[np.ndarray, np.ndarray]:
+    """The ``index``-th touch on a block face (corners first, an inset off its edges) and its normal."""
+    normal = np.array(BLOCK_NORMALS[face])
+    if face == "top":
+        corner = 0.45 * size - CLEARANCE_MM  # as the point-probe plan's rim touches
+        u, v = TOP_SPOTS[index % len(TOP_SPOTS)]
+        return np.array([u * corner, v * corner, 0.0]), normal
+    u, v = SIDE_SPOTS[index % len(SIDE_SPOTS)]
+    across = 0.42 * size * u
+    z = -thickness / 2 + v * (thickness / 2 - CLEARANCE_MM)
+    point = np.array([across, -size / 2, z]) if face == "front" else np.array([-size / 2, across, z])
+    return point, normal
 
 
 def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, rng) -> dict:
@@ -281,20 +354,23 @@ def _capsules(piece: Piece) -> list:
 def _place(groups, size, rng) -> list:
     """Random pieces for the feature groups ``[(id, element, touch count)]``; None if they collide."""
     count = len(groups)
-    ring = FOOT_RING * size if count > 1 else 0.0
     phase = rng.uniform(0, 2 * math.pi)
+    bold = rng.uniform(0.0, 1.0)  # how far this layout grows its pieces: crowded ones fit only small
     pieces = []
     for index, (fid, element, touches) in enumerate(groups):
         angle = phase + 2 * math.pi * index / count + rng.uniform(-0.2, 0.2)
+        # a piece alone may stand anywhere and lean across the block, the longer for it
+        ring = FOOT_RING * size * (rng.uniform(0.8, 1.4) if count > 1 else rng.uniform(0.0, 1.2))
         foot = np.array([ring * math.cos(angle), ring * math.sin(angle), 0.0])
         w = _direction(rng, angle if count > 1 else None)
-        radius = (SHARED_PLANE_RADIUS if element == "PL" and touches > 1 else STALK_RADIUS[element]) * size
-        head = BALL_RADIUS * size if element == "S" else 0.0
-        length = HEAD_LENGTH * size * rng.uniform(0.8, 1.2)
+        grow = rng.uniform(1.0, 1.0 + bold * (MAX_GROWTH - 1.0))  # larger pieces carry more information
+        radius = grow * (SHARED_PLANE_RADIUS if element == "PL" and touches > 1 else STALK_RADIUS[element]) * size
+        head = grow * BALL_RADIUS * size if element == "S" else 0.0
+        length = HEAD_LENGTH * size * rng.uniform(0.8, 0.8 + bold * MAX_LENGTH_GROWTH)
         if element == "S":
             length = max(length, (head + CLEARANCE_MM) / w[2] + 0.01 * size)
         ridge = _unit(_rotate(perpendicular_basis(w)[0], w, rng.uniform(0, 2 * math.pi))) if element == "L" else None
-        piece = Piece(fid, element, foot, w, radius, length, ridge, head)
+        piece = Piece(fid, element, foot, w, radius, length, ridge, head, rng.uniform(0, 2 * math.pi))
         if element == "L":
             piece.length = max(length, (piece.roof_drop() * w[2] + radius * piece.tilt + CLEARANCE_MM) / w[2])
         pieces.append(piece)
@@ -340,47 +416,104 @@ def _reachable(point, normal, owner, pieces, size) -> bool:
                for piece in pieces if piece.id != owner for a0, a1, r in _capsules(piece))
 
 
-def layout_plan(contacts, labels, size, ball_mm, rng):
+def layout_plan(contacts, labels, size, ball_mm, rng, block_faces=True):
     """One random layout and its touch plan, or None when the pieces collide or a touch is hidden.
 
-    ``contacts``: ContactTypes, sensor first; ``labels``: the feature id of each.
+    ``contacts``: ContactTypes, sensor first; ``labels``: the feature id of each. With ``block_faces``
+    the most touched planes are the block's top, front and left faces, the rest stand on stalks.
     """
     order = list(dict.fromkeys(labels))
     groups = [(fid, contacts[labels.index(fid)].fixture, labels.count(fid)) for fid in order]
-    pieces = _place(groups, size, rng)
-    if pieces is None:
-        return None
+    planes = sorted((g for g in groups if g[1] == "PL"), key=lambda g: -g[2]) if block_faces else []
+    faces = {face: fid for face, (fid, _, _) in zip(BLOCK_FACES, planes)}
+    pieces = _place([g for g in groups if g[0] not in faces.values()], size, rng)
+    return None if pieces is None else planned(contacts, labels, size, ball_mm, pieces, faces, rng)
+
+
+def planned(contacts, labels, size, ball_mm, pieces, faces, rng):
+    """The layout of these pieces and block faces with its touch plan (its sensors laid by ``rng``), or
+    None when a touch is hidden."""
+    order = list(dict.fromkeys(labels))
+    on_faces = {fid: face for face, fid in faces.items()}
+    layout = Layout(size, pieces, [], [], faces)
     by_id = {piece.id: piece for piece in pieces}
-    features = {piece.id: piece.feature() for piece in pieces}
+    features = {f.id: f for f in layout.features()}
     seen = {fid: 0 for fid in order}
-    entries, checks = [], []
     for ctype, fid in zip(contacts, labels):
         count = labels.count(fid)
-        for index, plan in ((seen[fid], entries), (seen[fid] + count, checks)):
-            point, normal = touch_spot(by_id[fid], index, 2 * count, rng)
-            if not _reachable(point, normal, fid, pieces, size):
+        for index, plan in ((seen[fid], layout.touches), (seen[fid] + count, layout.checks)):
+            if fid in on_faces:
+                point, normal = face_spot(on_faces[fid], index, size, layout.thickness)
+                reachable = normal[2] < 1 or _reachable(point, normal, fid, pieces, size)  # a side: from outside
+            else:
+                point, normal = touch_spot(by_id[fid], index, 2 * count)
+                reachable = _reachable(point, normal, fid, pieces, size)
+            if not reachable:
                 return None
             plan.append(sensor_entry(ctype, features[fid], point, normal, ball_mm, rng))
         seen[fid] += 1
-    return Layout(size, pieces, entries, checks)
+    return layout
 
 
-def best_layout(contacts, labels, size, ball_mm, seed, keep=LAYOUTS_COMPARED, trials=LAYOUT_TRIALS):
-    """The layout of highest margin among the first ``keep`` locating ones of up to ``trials`` seeded
-    random layouts, or None; and the smallest mobility met (what remains when none locates)."""
-    rng = np.random.default_rng(seed)
-    best, lowest, found = None, 6, 0
-    for _ in range(trials):
-        layout = layout_plan(contacts, labels, size, ball_mm, rng)
-        if layout is None:
+def best_layout(contacts, labels, size, ball_mm, seed, keep=LAYOUTS_COMPARED, trials=LAYOUT_TRIALS,
+                steps=REFINE_STEPS):
+    """The layout whose default plan carries the most information (:func:`plan_information`) among the
+    first ``keep`` locating ones of up to ``trials`` seeded random layouts, the planes on the block's
+    faces, or on stalks when no layout locates so, then :func:`refined` by ``steps`` nudges; None if none
+    locates; and the smallest mobility met (what remains when none locates)."""
+    lowest = 6
+    for block_faces in (True, False):
+        rng = np.random.default_rng(seed)
+        best, found = None, 0
+        for _ in range(trials):
+            layout = layout_plan(contacts, labels, size, ball_mm, rng, block_faces)
+            if layout is None:
+                continue
+            layout.mobility, layout.margin = plan_mobility(layout.features(), layout.touches, size)
+            lowest = min(lowest, layout.mobility)
+            if layout.mobility or layout.margin < MIN_MARGIN:
+                continue
+            found += 1
+            layout.information = plan_information(layout.features(), layout.touches + layout.checks, size)
+            if best is None or layout.information > best.information:
+                best = layout
+            if found == keep:
+                break
+        if best is not None:
+            return refined(best, contacts, labels, ball_mm, rng, steps), lowest
+    return None, lowest
+
+
+def _nudged(piece: Piece, size, rng) -> Piece:
+    """The piece moved a little: foot, direction, sizes and phase (a step of :func:`refined`)."""
+    w = _unit(piece.w + rng.normal(0.0, NUDGE_RAD, 3))
+    foot = piece.foot + np.r_[rng.normal(0.0, NUDGE * size, 2), 0.0]
+    ridge = None if piece.ridge is None else _unit(piece.ridge - (piece.ridge @ w) * w)
+    grow = np.exp(rng.normal(0.0, NUDGE, 3))
+    return Piece(piece.id, piece.element, foot, w, piece.radius * grow[0], piece.length * grow[1], ridge,
+                 piece.head_radius * grow[2], piece.phase + rng.normal(0.0, NUDGE_RAD))
+
+
+def refined(layout, contacts, labels, ball_mm, rng, steps=REFINE_STEPS):
+    """The layout improved by random nudges of one piece at a time, each kept when the pieces still fit,
+    print and are reached, the minimal plan still locates and the default plan's information grows."""
+    size = layout.size
+    for _ in range(steps if layout.pieces else 0):
+        pieces = list(layout.pieces)
+        k = int(rng.integers(len(pieces)))
+        pieces[k] = _nudged(pieces[k], size, rng)
+        piece = pieces[k]
+        if (math.degrees(math.asin(min(1.0, piece.w[2]))) < MIN_ELEVATION_DEG
+                or (piece.element == "S" and piece.radius > MAX_STALK_OF_BALL * piece.head_radius)
+                or not _fits(pieces, size)):
             continue
-        layout.mobility, layout.margin = plan_mobility(layout.features(), layout.touches, size)
-        lowest = min(lowest, layout.mobility)
-        if layout.mobility or layout.margin < MIN_MARGIN:
+        candidate = planned(contacts, labels, size, ball_mm, pieces, layout.faces, rng)
+        if candidate is None:
             continue
-        found += 1
-        if best is None or layout.margin > best.margin:
-            best = layout
-        if found == keep:
-            break
-    return best, lowest
+        candidate.mobility, candidate.margin = plan_mobility(candidate.features(), candidate.touches, size)
+        if candidate.mobility or candidate.margin < MIN_MARGIN:
+            continue
+        candidate.information = plan_information(candidate.features(), candidate.touches + candidate.checks, size)
+        if candidate.information > layout.information:
+            layout = candidate
+    return layout
