@@ -160,13 +160,18 @@ class Tree:
         self.flat_dev = float(np.linalg.norm(self.dev[self.flat]))
         # Round touches on one core in pairs: the difference of their squared distances from it is linear in y
         # (the circles' radical axis), a slab for y however far the box is from the core (:meth:`contract`).
+        # Each touch is paired with the one farthest from it across the core (the narrowest slab), at most n pairs.
         owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])
-        pairs = [(i, j) for i in np.flatnonzero(self.round) for j in np.flatnonzero(self.round)
-                 if i < j and owner[i] == owner[j]]
-        self.pairs = np.array(pairs, int).reshape(-1, 2)
-        d = self.direction[self.pairs[:, 0]]
-        self.pair_projector = np.eye(3) - np.where((self.core[self.pairs[:, 0]] == "line")[:, None, None],
-                                                   np.einsum("pi,pj->pij", d, d), 0.0)
+        projector = np.eye(3) - np.where((self.core == "line")[:, None, None],
+                                         np.einsum("ni,nj->nij", self.direction, self.direction), 0.0)
+        pairs = set()
+        for i in np.flatnonzero(self.round):
+            mates = np.flatnonzero(self.round & (owner == owner[i]) & (np.arange(len(owner)) != i))
+            if len(mates):
+                j = mates[np.argmax(np.linalg.norm((b[mates] - b[i]) @ projector[i], axis=1))]
+                pairs.add((min(i, j), max(i, j)))
+        self.pairs = np.array(sorted(pairs), int).reshape(-1, 2)
+        self.pair_projector = projector[self.pairs[:, 0]]
         # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
         # axes hold its touches' distances exactly and its last needs no split for them.
         lines = np.flatnonzero(self.round & (self.core == "line"))
