@@ -23,7 +23,7 @@ def design(
     sensor_ball: Annotated[float, typer.Option(help="Radius of ball and cylinder sensors, mm.")] = DEFAULT_BALL_MM,
     out: Annotated[Path | None, typer.Option(help="Output folder.", show_default="out/design-<class>-s<size>")] = None,
     force: Annotated[bool, typer.Option(help="Replace the output folder if fixturecad wrote it.")] = False,
-    seed: Annotated[int, typer.Option(help="Seed of the layout search.")] = DESIGN_SEED,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the layout search (0 or more).")] = DESIGN_SEED,
 ):
     """Design and build a fixture that realises a contact combination: what `build` writes, and the
     combination and class in features.json."""

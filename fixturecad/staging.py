@@ -18,7 +18,7 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-from fixturecad.errors import InputError
+from fixturecad.errors import InputError, write_error
 
 FEATURES_SCHEMA_PREFIX = "fixturecad.features/"  # any version: a folder from an older fixturecad is still ours
 
@@ -27,7 +27,7 @@ def written_by_fixturecad(folder: Path) -> bool:
     """Whether ``folder`` holds a features.json that fixturecad wrote."""
     try:
         document = json.loads((Path(folder) / "features.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return False
     return isinstance(document, dict) and str(document.get("schema", "")).startswith(FEATURES_SCHEMA_PREFIX)
 
@@ -58,8 +58,8 @@ def staged_folder(target: Path, force: bool = False):
     """Yield an empty temporary folder beside ``target``; move it into place when the block completes.
 
     On any error or interruption the temporary folder is removed and the
-    target is left as it was. OSErrors (a read-only or missing parent) become
-    one-line InputErrors.
+    target is left as it was. OSErrors become one-line errors: an InputError
+    (a read-only or missing parent), an EnvironmentFault (a full disk).
     """
     target = check_target(target, force)
     try:
@@ -67,7 +67,7 @@ def staged_folder(target: Path, force: bool = False):
         _remove_stale(target)
         staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent))
     except OSError as error:
-        raise InputError(f"cannot write in {target.parent}: {error.strerror or error}") from None
+        raise write_error(error, f"in {target.parent}") from None
     staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
     try:
         with _clean_exit_on_signals(staging):
@@ -75,7 +75,7 @@ def staged_folder(target: Path, force: bool = False):
             _move_into_place(staging, target)
     except OSError as error:
         shutil.rmtree(staging, ignore_errors=True)
-        raise InputError(f"cannot write {target}: {error.strerror or error}") from None
+        raise write_error(error, target) from None
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -91,8 +91,9 @@ def check_files(folder: Path, names, force: bool) -> Path:
         raise InputError(f"{folder} is a file, not a folder")
     try:
         folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()  # a folder it cannot write in is refused before the work
     except OSError as error:
-        raise InputError(f"cannot write in {folder}: {error.strerror or error}") from None
+        raise write_error(error, f"in {folder}") from None
     return folder
 
 
@@ -100,7 +101,10 @@ def check_files(folder: Path, names, force: bool) -> Path:
 def staged_file(path: Path):
     """Yield a temporary path beside ``path`` (same suffix); moved onto ``path`` when the block completes."""
     path = Path(path)
-    handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
+    try:
+        handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
+    except OSError as error:
+        raise write_error(error, path) from None
     os.close(handle)
     os.chmod(name, 0o666 & ~_umask())  # mkstemp makes it private; the result is an ordinary file
     try:
@@ -108,7 +112,7 @@ def staged_file(path: Path):
         os.replace(name, path)
     except OSError as error:
         Path(name).unlink(missing_ok=True)
-        raise InputError(f"cannot write {path}: {error.strerror or error}") from None
+        raise write_error(error, path) from None
     except BaseException:
         Path(name).unlink(missing_ok=True)
         raise

@@ -56,8 +56,13 @@ def read_touch_csv(text, feature_ids):
     """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
     file row (line number) of every touch by feature id (lists)."""
     text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8" starts with a byte order mark
+    reader = csv.reader(io.StringIO(text))
+    try:
+        rows = list(reader)
+    except csv.Error as error:  # a field over csv's limit, a NUL
+        raise ValueError(f"row {reader.line_num}: {error}") from None
     # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
-    numbered = [(k, row) for k, row in enumerate(csv.reader(io.StringIO(text)), start=1)
+    numbered = [(k, row) for k, row in enumerate(rows, start=1)
                 if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
     if not numbered:
         raise ValueError("the touch file is empty")
@@ -119,6 +124,8 @@ def read_touch_json(text, features):
         doc = json.loads(text)
     except json.JSONDecodeError as error:
         raise ValueError(f"touch JSON is not valid JSON: {error.msg} at line {error.lineno}") from None
+    except RecursionError:
+        raise ValueError("touch JSON is nested too deeply: a touch file is an object of flat lists") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("touches"), list):
         raise ValueError('touch JSON must be an object with a "touches" list')
     radius = ball_radius(doc.get("ball_radius_mm", 0.0), "ball_radius_mm")
@@ -225,6 +232,13 @@ def _sensor_contact(entry, points, where):
             raise ValueError(f"{where}: fixture must be an object such as {{\"o\": [x, y, z]}}")
         contact["fixture"] = {key: _check_finite(value, f"{where}: fixture {key}").tolist()
                               for key, value in entry["fixture"].items()}
+    ctype = ContactType.parse(entry["contact"])
+    # A fixed fixture side is a known point of the feature: a point feature is its own, and a plane on a
+    # plane touches along a face, where no point is needed.
+    if (ctype.fixture_fixed and ctype.fixture != "P" and {ctype.sensor, ctype.fixture} != {"PL"}
+            and "o" not in contact.get("fixture", {})):
+        raise ValueError(f"{where}: contact {entry['contact']} fixes the fixture side: give its contact point, "
+                         '"fixture": {"o": [x, y, z]} (fixture frame, mm)')
     return contact
 
 

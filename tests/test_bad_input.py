@@ -12,7 +12,7 @@ from contextlib import contextmanager
 
 import pytest
 
-from cli import assert_bad_input, run
+from cli import assert_bad_input, assert_fault, run
 
 
 @pytest.fixture
@@ -124,6 +124,9 @@ JSON_CASES = {
                               "non-zero"),
     "feature a list": ({"touches": [{"feature": ["top"], "points": [[1, 2, 50]]}]}, "unknown feature"),
     "not an object": ([1, 2], "object"),
+    "fixed fixture side without its point": ({"touches": [{"feature": "top", "contact": "S/F-PL/F", "points": [[1, 2, 50]],
+                                                          "sensor": {"kind": "sphere", "center": [1, 2, 53], "radius": 3}}] * 6},
+                                             '"fixture": {"o"'),
     "huge": ({"touches": [{"feature": "top", "points": [[1e302, 2, 50]] * 6}]}, "beyond"),
 }
 
@@ -204,3 +207,69 @@ def test_replaced_files_are_ordinary_files(built, tmp_path):
     os.umask(mask)
     for name in ("simulation.json", "simulation.png"):
         assert stat.S_IMODE((tmp_path / "sim" / name).stat().st_mode) == 0o666 & ~mask
+
+
+# Issue 22: the last tracebacks.
+
+FULL_DISK = """import errno, os, pathlib
+_write_text = pathlib.Path.write_text
+def _full(self, *args, **kwargs):
+    if self.name == {name!r}:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
+    return _write_text(self, *args, **kwargs)
+pathlib.Path.write_text = _full
+"""
+
+
+@pytest.mark.parametrize("name", ["features.json", "register.py"])  # written by calibrate, by its side process
+def test_calibrate_on_a_full_disk(cube, tmp_path, name):
+    """A full disk is the machine's fault: exit 1 with the reason, and no as-built folder."""
+    (tmp_path / "site").mkdir()
+    (tmp_path / "site" / "sitecustomize.py").write_text(FULL_DISK.format(name=name))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path / "site"), os.environ.get("PYTHONPATH")]))}
+    out = run("calibrate", cube, cube / "touches.template.csv", "--out", tmp_path / "asbuilt", env=env)
+    assert_fault(out, "cannot write", "No space left on device")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cube", "site"]
+
+
+def test_simulate_into_a_read_only_folder(cube, tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    with _read_only(locked):
+        assert_bad_input(run("simulate", cube, "--trials", 2, "--out", locked), "cannot write in")
+        assert list(locked.iterdir()) == []
+
+
+def test_a_csv_field_over_the_csv_limit(cube, tmp_path):
+    path = touches_csv(cube, tmp_path / "t.csv", ["top,1" + "0" * 140_000 + ",0,50"])
+    assert_bad_input(run("register", cube, path), "row 2", "field limit")
+    assert_bad_input(run("calibrate", cube, path, "--out", tmp_path / "asbuilt"), "row 2", "field limit")
+    assert not (tmp_path / "asbuilt").exists()
+
+
+def test_deeply_nested_json(cube, tmp_path):
+    path = tmp_path / "touches.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    assert_bad_input(run("register", cube, path), "nested too deeply")
+    (cube / "features.json").write_text(path.read_text())
+    assert_bad_input(run("simulate", cube, "--trials", 2), "features.json")
+
+
+def test_touch_plan_names_a_plan_not_a_path(cube):
+    (cube / "plans").mkdir()
+    assert_bad_input(run("simulate", cube, "--trials", 2, "--touch-plan", "../features"), "unknown touch plan")
+    (cube / "plans" / "mine.json").write_text('{"note": "not a plan"}')
+    assert_bad_input(run("simulate", cube, "--trials", 2, "--touch-plan", "mine"), "mine.json", "not a touch plan")
+    assert not (cube / "simulation.json").exists()
+
+
+def test_design_seed_must_not_be_negative(tmp_path):
+    assert_bad_input(run("design", "--class", "{S-T2}x3 {S-S}x3", "--seed", -1, "--out", tmp_path / "d"), "--seed")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_register_py_without_numpy(cube):
+    """Python without its site packages has no numpy: register.py says so in one line, exit 1."""
+    out = subprocess.run([sys.executable, "-I", "-S", str(cube / "register.py"), str(cube / "touches.template.csv")],
+                         capture_output=True, text=True)
+    assert_fault(out, "numpy is not installed", "pip install numpy scipy")
