@@ -364,7 +364,8 @@ def search_line(result):
 
 
 def format_result(result, pose_format="matrix"):
-    """A short human-readable report of a registration result, the pose in a controller's convention."""
+    """A short human-readable report of a registration result, the pose in a controller's convention
+    (``pose_format`` None: without the pose)."""
     from .controllers import format_pose
 
     lines = [f"status: {result['status']}", search_line(result),
@@ -375,7 +376,8 @@ def format_result(result, pose_format="matrix"):
         )
     rows = result.get("touch_rows")
     if result["pose"] is not None:
-        lines.append(format_pose(pose_format, result["pose"], result["covariance"]))
+        if pose_format is not None:
+            lines.append(format_pose(pose_format, result["pose"], result["covariance"]))
     elif result["flagged"]:
         lines.append("pose: none (several touches could each explain the inconsistency: see flagged)")
     else:
@@ -487,9 +489,18 @@ def target(sigma_mm, sigma_deg):
 
 def report(result, pose_format="matrix", as_json=False):
     """What the command line prints: the JSON result (with the pose in ``pose_format`` under
-    ``controller``: its numbers, their sigmas and the text) or the human-readable report."""
+    ``controller``: its numbers, their sigmas and the text) or the human-readable report; with the
+    pose format ``json`` that is JSON too, the pose's object with ``status`` and the report's other
+    lines (``report``) in it, so that stdout parses."""
     if not as_json:
-        return format_result(result, pose_format)
+        if pose_format != "json":
+            return format_result(result, pose_format)
+        from .controllers import format_pose, json_lines
+
+        document = {"status": result["status"], "report": format_result(result, None).splitlines()}
+        if result["pose"] is not None:
+            document.update(json.loads(format_pose("json", result["pose"], result["covariance"])))
+        return json_lines(document)
     from .controllers import format_pose, sigmas_from_covariance, values_from_pose
 
     if result["pose"] is None:
