@@ -273,3 +273,59 @@ def test_register_py_without_numpy(cube):
     out = subprocess.run([sys.executable, "-I", "-S", str(cube / "register.py"), str(cube / "touches.template.csv")],
                          capture_output=True, text=True)
     assert_fault(out, "numpy is not installed", "pip install numpy scipy")
+
+
+PLANE = {"feature": "top", "contact": "PL/F-PL/F", "sensor": {"kind": "plane", "point": [1, 2, 50], "normal": [0, 0, 1]}}
+# Touch files the shipped touches.schema.json rejects, made from a build's valid touches.template.json.
+SCHEMA_CASES = {
+    "rho a string": (lambda doc: doc["touches"][0].update(rho="x"), "rho"),
+    "rho a list": (lambda doc: doc["touches"][0].update(rho=[1]), "rho"),
+    "rho a boolean": (lambda doc: doc["touches"][0].update(rho=True), "rho"),
+    "coordinate a string": (lambda doc: doc["touches"][0]["points"][0].__setitem__(0, "1"), "points"),
+    "coordinate a boolean": (lambda doc: doc["touches"][0]["points"][0].__setitem__(0, True), "points"),
+    "point of two numbers": (lambda doc: doc["touches"][0]["points"].__setitem__(0, [1, 2]), "points"),
+    "no points": (lambda doc: doc["touches"][0].update(points=[]), "points"),
+    "unknown top-level key": (lambda doc: doc.update(units="mm"), "units"),
+    "fixture with another key": (lambda doc: doc["touches"][0].update(fixture={"u": [0, 0, 1]}), "fixture"),
+    "fixture point of two": (lambda doc: doc["touches"][0].update(fixture={"o": [0, 0]}), "fixture"),
+    "sensor with approaches": (lambda doc: doc["touches"].append({**PLANE, "approaches": [[0, 0, -1]]}), "approaches"),
+    "sensor point of two": (lambda doc: doc["touches"].append({**PLANE, "sensor": {**PLANE["sensor"], "point": [1, 2]}}),
+                            "sensor point"),
+    "sensor radius negative": (lambda doc: doc["touches"].append(
+        {"feature": "top", "contact": "S/M-PL/M", "sensor": {"kind": "sphere", "center": [1, 2, 53], "radius": -3}}),
+        "sensor radius"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SCHEMA_CASES))
+def test_touch_files_are_checked_against_the_shipped_schema(cube, tmp_path, case):
+    """Whatever touches.schema.json rejects, register and register.py refuse in one line."""
+    from importlib import resources
+
+    from jsonschema import Draft202012Validator
+
+    schema = json.loads(resources.files("fixturecad").joinpath("schema/touches.schema.json").read_text())
+    document = json.loads((cube / "touches.template.json").read_text())
+    assert Draft202012Validator(schema).is_valid(document)
+    change, words = SCHEMA_CASES[case]
+    change(document)
+    assert not Draft202012Validator(schema).is_valid(document)
+    path = tmp_path / "touches.json"
+    path.write_text(json.dumps(document))
+    assert_bad_input(run("register", cube, path), words)
+    out = subprocess.run([sys.executable, str(cube / "register.py"), str(path)], capture_output=True, text=True)
+    assert out.returncode == 2 and len(out.stderr.splitlines()) == 1 and words in out.stderr, out.stderr
+
+
+def test_an_approach_of_zero_is_refused(cube, tmp_path):
+    rows = [line + ",0,0,-1" for line in (cube / "touches.template.csv").read_text().splitlines()
+            if line and not line.startswith(("#", "feature"))]
+    rows[3] = rows[3].removesuffix(",0,0,-1") + ",0,0,0"
+    path = tmp_path / "t.csv"
+    path.write_text("feature,x,y,z,ax,ay,az\n" + "\n".join(rows) + "\n")
+    assert_bad_input(run("register", cube, path), "row 5", "approach", "zero")
+    document = json.loads((cube / "touches.template.json").read_text())
+    document["touches"][0]["approaches"] = [[0, 0, -1]] * 3 + [[0, 0, 0]]
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps(document))
+    assert_bad_input(run("register", cube, path), "touch 1", "[0, 0, 0]")
