@@ -329,3 +329,13 @@ def test_an_approach_of_zero_is_refused(cube, tmp_path):
     path = tmp_path / "t.json"
     path.write_text(json.dumps(document))
     assert_bad_input(run("register", cube, path), "touch 1", "[0, 0, 0]")
+
+
+def test_suggest_and_design_agree_on_what_a_class_is(tmp_path):
+    """A class outside Table V that no template realises: the same one line, exit 2, from both."""
+    suggest = run("suggest", "{S-T2}x5")
+    design = run("design", "--class", "{S-T2}x5", "--out", tmp_path / "d")
+    for out in (suggest, design):
+        assert_bad_input(out, "{S-T2}x5 is not a class of Table V")
+    assert suggest.stderr == design.stderr
+    assert list(tmp_path.iterdir()) == []
