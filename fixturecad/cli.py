@@ -5,6 +5,10 @@ the top level. Heavy imports (cadquery above all) happen inside the commands
 that need them, so ``fixturecad --help`` and the theory commands start fast.
 """
 
+from fixturecad import interrupt
+
+interrupt.install()  # before any other import: Ctrl-C and SIGTERM are one line from the first instruction
+
 import sys
 import warnings
 from typing import Annotated
@@ -63,8 +67,8 @@ def main(argv: list[str] | None = None) -> None:
     except EnvironmentFault as error:
         fail(str(error), 1)
     except (typer.Abort, KeyboardInterrupt):
-        # Ctrl-C outside a folder being written (fixturecad.staging handles those): nothing was written.
-        print("fixturecad: interrupted; nothing was written", file=sys.stderr)
+        # Ctrl-C where fixturecad.interrupt could not take it (main called off the main thread).
+        sys.stderr.write(interrupt.MESSAGE.decode())
         raise SystemExit(130)
     except Exception as error:
         if type(error).__name__ == "NoArgsIsHelpError":

@@ -13,12 +13,12 @@ fixturecad wrote (it holds a fixturecad features.json) or an empty folder.
 import json
 import os
 import shutil
-import signal
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
 from fixturecad.errors import InputError, write_error
+from fixturecad.interrupt import removing
 
 FEATURES_SCHEMA_PREFIX = "fixturecad.features/"  # any version: a folder from an older fixturecad is still ours
 
@@ -70,7 +70,7 @@ def staged_folder(target: Path, force: bool = False):
         raise write_error(error, f"in {target.parent}") from None
     staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
     try:
-        with _clean_exit_on_signals(staging):
+        with removing(staging):
             yield staging
             _move_into_place(staging, target)
     except OSError as error:
@@ -108,8 +108,9 @@ def staged_file(path: Path):
     os.close(handle)
     os.chmod(name, 0o666 & ~_umask())  # mkstemp makes it private; the result is an ordinary file
     try:
-        yield Path(name)
-        os.replace(name, path)
+        with removing(name):
+            yield Path(name)
+            os.replace(name, path)
     except OSError as error:
         Path(name).unlink(missing_ok=True)
         raise write_error(error, path) from None
@@ -134,31 +135,6 @@ def _running(pid: int) -> bool:
     except PermissionError:
         return True
     return True
-
-
-@contextmanager
-def _clean_exit_on_signals(staging: Path):
-    """Ctrl-C or SIGTERM in the block: remove the temporary folder, say so in one line, exit 128 + signal.
-
-    Exiting from the handler, not raising, because an exception raised while
-    a C extension initialises (cadquery's import) comes out as an ImportError
-    with a traceback.
-    """
-    def stop(signum, frame):
-        shutil.rmtree(staging, ignore_errors=True)
-        os.write(2, b"fixturecad: interrupted; nothing was written\n")
-        os._exit(128 + signum)
-
-    try:
-        previous = {signum: signal.signal(signum, stop) for signum in (signal.SIGINT, signal.SIGTERM)}
-    except ValueError:  # not the main thread: leave signals alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
 
 
 def _umask() -> int:

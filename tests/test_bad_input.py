@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 
@@ -339,3 +340,39 @@ def test_suggest_and_design_agree_on_what_a_class_is(tmp_path):
         assert_bad_input(out, "{S-T2}x5 is not a class of Table V")
     assert suggest.stderr == design.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def _until_it_catches_sigterm(process):
+    """Wait until the process handles SIGTERM (Python does not by default): its first instruction has run."""
+    status = Path(f"/proc/{process.pid}/status")
+    if not status.exists():
+        pytest.skip("no /proc to see a process's signal handlers")
+    deadline = time.monotonic() + 60
+    while not int(next(line for line in status.read_text().splitlines() if line.startswith("SigCgt:")).split()[1],
+                  16) >> (signal.SIGTERM - 1) & 1:
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.001)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("delay", [0.0, 1.0])  # in the imports (trimesh's swallowed Ctrl-C), or in the trials
+def test_an_interrupted_simulate_says_so_and_writes_nothing(cube, signum, delay):
+    process = subprocess.Popen([sys.executable, "-c", "from fixturecad.cli import main; main()", "simulate", str(cube),
+                                "--trials", "1000"], stderr=subprocess.PIPE, text=True)
+    _until_it_catches_sigterm(process)
+    time.sleep(delay)
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signum
+    assert stderr == "fixturecad: interrupted; nothing was written\n"
+    assert not [p.name for p in cube.iterdir() if "simulation" in p.name]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_register_py_says_so(cube, signum):
+    process = subprocess.Popen([sys.executable, str(cube / "register.py"), str(cube / "touches.template.csv")],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _until_it_catches_sigterm(process)
+    process.send_signal(signum)
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signum and stdout == "" and stderr == "register.py: interrupted\n"
