@@ -5,6 +5,10 @@ the top level. Heavy imports (cadquery above all) happen inside the commands
 that need them, so ``fixturecad --help`` and the theory commands start fast.
 """
 
+from fixturecad import interrupt
+
+interrupt.install()  # before any other import: Ctrl-C and SIGTERM are one line from the first instruction
+
 import sys
 import warnings
 from typing import Annotated
@@ -15,7 +19,7 @@ from fixturecad import __version__
 
 from fixturecad.calibration_commands import app as calibration_app
 from fixturecad.design_commands import app as design_app
-from fixturecad.errors import InputError
+from fixturecad.errors import EnvironmentFault, InputError
 from fixturecad.fixture_commands import app as fixture_app
 from fixturecad.plan_commands import app as plan_app
 from fixturecad.registration_commands import app as registration_app
@@ -46,23 +50,25 @@ def _options(
     """Design, build and register touch-sensing reference fixtures."""
 
 
-def fail(message: str) -> None:
-    """Print one line on stderr and exit with code 2."""
+def fail(message: str, code: int = 2) -> None:
+    """Print one line on stderr and exit with ``code`` (2: bad input, 1: the machine)."""
     print(f"fixturecad: error: {message}", file=sys.stderr)
-    raise SystemExit(2)
+    raise SystemExit(code)
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point: usage errors and bad input are one line, exit 2."""
+    """Console entry point: usage errors and bad input are one line, exit 2; a full disk one line, exit 1."""
     command = typer.main.get_command(app)
     warnings.simplefilter("ignore")  # a user sees results and one-line errors, never Python warnings
     try:
         code = command.main(args=argv, prog_name="fixturecad", standalone_mode=False)
     except InputError as error:
         fail(str(error))
+    except EnvironmentFault as error:
+        fail(str(error), 1)
     except (typer.Abort, KeyboardInterrupt):
-        # Ctrl-C outside a folder being written (fixturecad.staging handles those): nothing was written.
-        print("fixturecad: interrupted; nothing was written", file=sys.stderr)
+        # Ctrl-C where fixturecad.interrupt could not take it (main called off the main thread).
+        sys.stderr.write(interrupt.MESSAGE.decode())
         raise SystemExit(130)
     except Exception as error:
         if type(error).__name__ == "NoArgsIsHelpError":

@@ -23,20 +23,18 @@ def design(
     sensor_ball: Annotated[float, typer.Option(help="Radius of ball and cylinder sensors, mm.")] = DEFAULT_BALL_MM,
     out: Annotated[Path | None, typer.Option(help="Output folder.", show_default="out/design-<class>-s<size>")] = None,
     force: Annotated[bool, typer.Option(help="Replace the output folder if fixturecad wrote it.")] = False,
-    seed: Annotated[int, typer.Option(help="Seed of the layout search.")] = DESIGN_SEED,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the layout search (0 or more).")] = DESIGN_SEED,
 ):
     """Design and build a fixture that realises a contact combination: what `build` writes, and the
     combination and class in features.json."""
     from fixturecad.build import build, default_target
-    from fixturecad.design.combination import for_class, in_table_five, parse
+    from fixturecad.design.combination import for_class, parse
     from fixturecad.design.fixture import design as make_design
-    from fixturecad.fixture_commands import class_members
+    from fixturecad.fixture_commands import table_five_class
 
     if bool(contacts) == (contact_class is not None):
         raise InputError("give either contacts (e.g. P/F-PL/M@a ...) or --class, not both or neither")
-    combination = parse(contacts) if contacts else for_class(class_members(contact_class))
-    if contact_class is not None and not in_table_five(combination.members):
-        raise InputError(f"{contact_class} is not a class of Table V: it does not locate the part minimally")
+    combination = parse(contacts) if contacts else for_class(table_five_class(contact_class))
     fixture = make_design(combination, size, sensor_ball, seed)
     target = out if out is not None else default_target(fixture)
     typer.echo(str(build(fixture, target, force=force)))

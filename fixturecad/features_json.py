@@ -76,7 +76,7 @@ def read(folder) -> dict:
         raise InputError(f"no {NAME} in {folder}: run fixturecad build first")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:  # RecursionError: nested too deep
         raise InputError(f"{path} is not valid JSON: {getattr(error, 'msg', error)}") from None
     if not isinstance(data, dict) or data.get("schema") != schema_id():
         found = data.get("schema") if isinstance(data, dict) else None

@@ -142,6 +142,17 @@ def class_members(text: str) -> tuple:
     return tuple(sorted(members, key=CLASSES.index))
 
 
+def table_five_class(text: str) -> tuple:
+    """The members of a class of Table V (a minimal locating class); InputError, the one reason suggest and
+    design give, if it is not one."""
+    from fixturecad.design.combination import in_table_five
+
+    members = class_members(text)
+    if not in_table_five(members):
+        raise InputError(f"{text} is not a class of Table V: it does not locate the part minimally")
+    return members
+
+
 @app.command()
 def suggest(
     contact_class: Annotated[str, typer.Argument(help='Catalogue class, e.g. "{G3}{S-S}{S-T2}{C-R-C}".')],
@@ -160,14 +171,8 @@ def suggest(
             options = " ".join(f"--{p.name} {p.default:g}" for p in cls.PARAMS)
             rows.append({"template": cls.name, "plan": name, "class": plan.contact_class,
                          "build": f"fixturecad build {cls.name} {options}", "note": plan.note})
-    if not rows:
-        from fixturecad.design.combination import in_table_five
-
-        if not in_table_five(wanted):
-            typer.echo(f"no template realises {contact_class}, and it is not a class of Table V; "
-                       "see `fixturecad templates` for the classes they do")
-            return
-        name = "".join("{" + member + "}" for member in wanted)
+    if not rows:  # no template realises it: a designed fixture, if it is a class design takes
+        name = "".join("{" + member + "}" for member in table_five_class(contact_class))
         rows.append({"template": "design", "plan": "default", "class": name,
                      "build": f'fixturecad design --class "{name}"', "note": "no template realises it: a designed fixture"})
     typer.echo(render(rows, ["template", "plan", "class", "build", "note"], fmt))

@@ -11,6 +11,7 @@ from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 app = typer.Typer()
 
 PLANS_DIR = "plans"
+PLAN_NAME = r"[a-z0-9][a-z0-9_-]*"  # a file name in PLANS_DIR, never a path out of it
 MIN_TOUCHES = 6  # point-probe and ball-tip touches give one row each; a pose needs six
 MAX_TOUCHES = 60
 POINT_REACH = 20.0  # a point of interest farther than this many touch spreads is not one this fixture locates
@@ -89,7 +90,7 @@ def plan(
     if not (margin >= 0 and np.isfinite(margin)):
         raise InputError(f"--margin must be a non-negative number of mm, got {margin}")
     kind, point = _criterion(criterion)
-    if not re.fullmatch(r"[a-z0-9][a-z0-9_-]*", name):
+    if not re.fullmatch(PLAN_NAME, name):
         raise InputError(f"--name must be lower-case letters, digits, - and _, got {name!r}")
     out_dir = Path(out_dir)
     if not out_dir.is_dir():

@@ -123,16 +123,15 @@ def simulate(
     if not stl.is_file():
         raise InputError(f"no fixture.stl in {out_dir}: run fixturecad build first")
     routine = load_routine(out_dir)
-    designed = out_dir / "plans" / f"{touch_plan}.json"
-    if touch_plan not in document["plans"] and designed.is_file():  # a plan of `fixturecad plan`
-        document = {**document, "plans": {**document["plans"], touch_plan: json.loads(designed.read_text())}}
-    folder = check_files(out_dir if out is None else out, (SUMMARY_NAME, PLOT_NAME), force)
+    if touch_plan not in document["plans"]:
+        document = {**document, "plans": {**document["plans"], **_designed_plan(out_dir, touch_plan)}}
     try:
         tolerance = tolerance_from_document(features_from_json(document), document, fixture_tolerance)
         mesh = load_mesh(stl, document["volume_mm3"])
         sampler = TouchSampler(document, mesh, touch_plan, plan is Positions.random, tolerance)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
+    folder = check_files(out_dir if out is None else out, (SUMMARY_NAME, PLOT_NAME), force)
     rng = np.random.default_rng(seed)
     # The residual test allows for the tessellation: chord errors spread over [0, tolerance].
     chord = float(document["files"]["stl_tolerance_mm"])
@@ -151,6 +150,24 @@ def simulate(
         plot_errors(records, summary, path)
     typer.echo(format_summary(summary))
     typer.echo(f"plot: {folder / PLOT_NAME}")
+
+
+def _designed_plan(out_dir: Path, name: str) -> dict:
+    """{name: plan} of OUT_DIR/plans/NAME.json written by ``fixturecad plan``, {} if there is none."""
+    import re
+
+    from fixturecad.plan_commands import PLAN_NAME, PLANS_DIR
+
+    path = out_dir / PLANS_DIR / f"{name}.json"
+    if not re.fullmatch(PLAN_NAME, name) or not path.is_file():
+        return {}  # the caller names the plans there are
+    try:
+        plan = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, RecursionError):
+        plan = None
+    if not isinstance(plan, dict) or not isinstance(plan.get("touch_plan"), list):
+        raise InputError(f"{path} is not a touch plan of fixturecad plan: write it again")
+    return {name: plan}
 
 
 def _progress_stream():

@@ -9,6 +9,7 @@ parent sends the jobs, by name, with their arguments.
 
 import importlib
 import pickle
+import re
 import subprocess
 import sys
 
@@ -42,12 +43,16 @@ class SideProcess:
         self.process.stdin.flush()
 
     def wait(self) -> None:
-        """Wait for the child to finish the jobs sent; RuntimeError with its last error line if it failed."""
+        """Wait for the child to finish the jobs sent; if it failed, its OSError (a full disk) as the caller's
+        own, else RuntimeError with its last error line."""
         self.process.stdin.close()
         error = self.process.stderr.read()
         self.process.wait()
         if self.process.returncode != 0:
             lines = error.decode(errors="replace").strip().splitlines()
+            failed = re.search(r"\[Errno (\d+)\] ([^:]+)", lines[-1]) if lines else None
+            if failed:
+                raise OSError(int(failed[1]), failed[2])
             raise RuntimeError(f"side process failed: {lines[-1] if lines else 'no message'}")
 
     def cancel(self) -> None:

@@ -13,12 +13,12 @@ fixturecad wrote (it holds a fixturecad features.json) or an empty folder.
 import json
 import os
 import shutil
-import signal
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-from fixturecad.errors import InputError
+from fixturecad.errors import InputError, write_error
+from fixturecad.interrupt import removing
 
 FEATURES_SCHEMA_PREFIX = "fixturecad.features/"  # any version: a folder from an older fixturecad is still ours
 
@@ -27,7 +27,7 @@ def written_by_fixturecad(folder: Path) -> bool:
     """Whether ``folder`` holds a features.json that fixturecad wrote."""
     try:
         document = json.loads((Path(folder) / "features.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return False
     return isinstance(document, dict) and str(document.get("schema", "")).startswith(FEATURES_SCHEMA_PREFIX)
 
@@ -58,8 +58,8 @@ def staged_folder(target: Path, force: bool = False):
     """Yield an empty temporary folder beside ``target``; move it into place when the block completes.
 
     On any error or interruption the temporary folder is removed and the
-    target is left as it was. OSErrors (a read-only or missing parent) become
-    one-line InputErrors.
+    target is left as it was. OSErrors become one-line errors: an InputError
+    (a read-only or missing parent), an EnvironmentFault (a full disk).
     """
     target = check_target(target, force)
     try:
@@ -67,15 +67,15 @@ def staged_folder(target: Path, force: bool = False):
         _remove_stale(target)
         staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent))
     except OSError as error:
-        raise InputError(f"cannot write in {target.parent}: {error.strerror or error}") from None
+        raise write_error(error, f"in {target.parent}") from None
     staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
     try:
-        with _clean_exit_on_signals(staging):
+        with removing(staging):
             yield staging
             _move_into_place(staging, target)
     except OSError as error:
         shutil.rmtree(staging, ignore_errors=True)
-        raise InputError(f"cannot write {target}: {error.strerror or error}") from None
+        raise write_error(error, target) from None
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -91,8 +91,9 @@ def check_files(folder: Path, names, force: bool) -> Path:
         raise InputError(f"{folder} is a file, not a folder")
     try:
         folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()  # a folder it cannot write in is refused before the work
     except OSError as error:
-        raise InputError(f"cannot write in {folder}: {error.strerror or error}") from None
+        raise write_error(error, f"in {folder}") from None
     return folder
 
 
@@ -100,15 +101,19 @@ def check_files(folder: Path, names, force: bool) -> Path:
 def staged_file(path: Path):
     """Yield a temporary path beside ``path`` (same suffix); moved onto ``path`` when the block completes."""
     path = Path(path)
-    handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
+    try:
+        handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
+    except OSError as error:
+        raise write_error(error, path) from None
     os.close(handle)
     os.chmod(name, 0o666 & ~_umask())  # mkstemp makes it private; the result is an ordinary file
     try:
-        yield Path(name)
-        os.replace(name, path)
+        with removing(name):
+            yield Path(name)
+            os.replace(name, path)
     except OSError as error:
         Path(name).unlink(missing_ok=True)
-        raise InputError(f"cannot write {path}: {error.strerror or error}") from None
+        raise write_error(error, path) from None
     except BaseException:
         Path(name).unlink(missing_ok=True)
         raise
@@ -130,31 +135,6 @@ def _running(pid: int) -> bool:
     except PermissionError:
         return True
     return True
-
-
-@contextmanager
-def _clean_exit_on_signals(staging: Path):
-    """Ctrl-C or SIGTERM in the block: remove the temporary folder, say so in one line, exit 128 + signal.
-
-    Exiting from the handler, not raising, because an exception raised while
-    a C extension initialises (cadquery's import) comes out as an ImportError
-    with a traceback.
-    """
-    def stop(signum, frame):
-        shutil.rmtree(staging, ignore_errors=True)
-        os.write(2, b"fixturecad: interrupted; nothing was written\n")
-        os._exit(128 + signum)
-
-    try:
-        previous = {signum: signal.signal(signum, stop) for signum in (signal.SIGINT, signal.SIGTERM)}
-    except ValueError:  # not the main thread: leave signals alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
 
 
 def _umask() -> int:

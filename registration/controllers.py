@@ -307,7 +307,11 @@ def _json_text(convention, fixture2meas, values, sigmas, frames):
         "sigma": None if sigmas is None else {"translation_mm": [float(f"{x:.3g}") for x in sigmas[:3]],
                                              "quaternion_wxyz": [float(f"{x:.3g}") for x in sigmas[3:]]},
     }
-    # One key a line, each value on its line: readable, and still one JSON object.
+    return json_lines(document)
+
+
+def json_lines(document: dict) -> str:
+    """One key a line, each value on its line: readable, and still one JSON object."""
     return "{\n" + ",\n".join(f"  {json.dumps(key)}: {json.dumps(value)}" for key, value in document.items()) + "\n}"
 
 

@@ -25,6 +25,7 @@ import csv
 import io
 import json
 import os
+import reprlib
 import sys
 import warnings
 
@@ -56,8 +57,13 @@ def read_touch_csv(text, feature_ids):
     """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
     file row (line number) of every touch by feature id (lists)."""
     text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8" starts with a byte order mark
+    reader = csv.reader(io.StringIO(text))
+    try:
+        rows = list(reader)
+    except csv.Error as error:  # a field over csv's limit, a NUL
+        raise ValueError(f"row {reader.line_num}: {error}") from None
     # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
-    numbered = [(k, row) for k, row in enumerate(csv.reader(io.StringIO(text)), start=1)
+    numbered = [(k, row) for k, row in enumerate(rows, start=1)
                 if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
     if not numbered:
         raise ValueError("the touch file is empty")
@@ -80,6 +86,8 @@ def read_touch_csv(text, feature_ids):
         if not np.all(np.isfinite(values)):
             raise ValueError(f"row {line}: coordinates must be finite, got {','.join(row[1:])}")
         _check_range(np.array(values), f"row {line}")
+        if width == 7 and not any(values[3:]):
+            raise ValueError(f"row {line}: the approach direction ax,ay,az is zero: give the direction the probe moved")
         touches.setdefault(row[0].strip(), []).append(values[:3])
         approaches.setdefault(row[0].strip(), []).append(values[3:] or [np.nan] * 3)
         lines.setdefault(row[0].strip(), []).append(line)
@@ -119,8 +127,13 @@ def read_touch_json(text, features):
         doc = json.loads(text)
     except json.JSONDecodeError as error:
         raise ValueError(f"touch JSON is not valid JSON: {error.msg} at line {error.lineno}") from None
+    except RecursionError:
+        raise ValueError("touch JSON is nested too deeply: a touch file is an object of flat lists") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("touches"), list):
         raise ValueError('touch JSON must be an object with a "touches" list')
+    unknown = set(doc) - {"ball_radius_mm", "touches"}
+    if unknown:
+        raise ValueError(f"touch JSON: unknown key {sorted(unknown)[0]!r}; keys are ball_radius_mm, touches")
     radius = ball_radius(doc.get("ball_radius_mm", 0.0), "ball_radius_mm")
     touches, contacts, approaches, labels = {}, [], {}, {}
     contact_labels = []
@@ -135,9 +148,15 @@ def read_touch_json(text, features):
         _check_id(entry.get("feature"), features, where)
         _check_contact(entry, features[entry["feature"]], radius, where)
         points = _points(entry, "points", where, required="sensor" not in entry)
+        if "rho" in entry:
+            _json_array(entry["rho"], (), f"{where}: rho")
+        if "fixture" in entry:
+            _fixture_point(entry["fixture"], where)
         if "sensor" in entry:
             if "contact" not in entry:
                 raise ValueError(f"{where}: a sensor entry needs its contact, e.g. \"PL/F-PL/F\"")
+            if "approaches" in entry:
+                raise ValueError(f"{where}: a sensor entry has no approaches (they are the probe's, one per point)")
             if len(points) > 1:
                 raise ValueError(f"{where}: a sensor makes one touch: give at most one contact point")
             contacts.append(_sensor_contact(entry, points, where))
@@ -147,6 +166,8 @@ def read_touch_json(text, features):
             approach = _points(entry, "approaches", where)
             if len(approach) != len(points):
                 raise ValueError(f"{where}: {len(points)} points but {len(approach)} approaches")
+            if not np.all(np.linalg.norm(approach, axis=1) > 0):
+                raise ValueError(f"{where}: an approach is [0, 0, 0]: give the direction the probe moved")
         else:
             approach = np.full((len(points), 3), np.nan)
         touches.setdefault(entry["feature"], []).extend(points)
@@ -194,12 +215,16 @@ def _points(entry, key, where, required=True):
         if required:
             raise ValueError(f"{where}: needs \"{key}\": [[x, y, z], ...] in mm")
         return np.zeros((0, 3))
-    value = entry.get(key)
-    array = _check_finite(value, f"{where}: {key}")
-    if array.ndim != 2 or array.shape[1] != 3:
-        raise ValueError(f"{where}: {key} must be a list of [x, y, z], got {value!r}")
+    array = _json_array(entry[key], (None, 3), f"{where}: {key}")
     _check_range(array, f"{where}: {key}")
     return array
+
+
+def _fixture_point(fixture, where):
+    """The known contact point of a fixed fixture side, ``{"o": [x, y, z]}`` (fixture frame, mm)."""
+    if not isinstance(fixture, dict) or set(fixture) - {"o"}:
+        raise ValueError(f"{where}: fixture must be an object such as {{\"o\": [x, y, z]}}, got {reprlib.repr(fixture)}")
+    return {key: _json_array(value, (3,), f"{where}: fixture {key}").tolist() for key, value in fixture.items()}
 
 
 def _sensor_contact(entry, points, where):
@@ -214,17 +239,24 @@ def _sensor_contact(entry, points, where):
                          + "".join(f" (and optionally {key})" for key in optional))
     for key, value in sensor.items():
         if key != "kind":
-            _check_range(_check_finite(value, f"{where}: sensor {key}"), f"{where}: sensor {key}")
+            array = _json_array(value, () if key == "radius" else (3,), f"{where}: sensor {key}")
+            _check_range(array, f"{where}: sensor {key}")
+            if array.ndim == 0 and array < 0:
+                raise ValueError(f"{where}: sensor {key} must be a number of mm >= 0, got {value!r}")
     contact = {"feature": entry["feature"], "contact": entry["contact"], "sensor": sensor}
     if len(points):
         contact["point"] = points[0].tolist()
     if "rho" in entry:
-        contact["rho"] = float(_check_finite(entry["rho"], f"{where}: rho").reshape(-1)[0])
+        contact["rho"] = float(entry["rho"])
     if "fixture" in entry:
-        if not isinstance(entry["fixture"], dict):
-            raise ValueError(f"{where}: fixture must be an object such as {{\"o\": [x, y, z]}}")
-        contact["fixture"] = {key: _check_finite(value, f"{where}: fixture {key}").tolist()
-                              for key, value in entry["fixture"].items()}
+        contact["fixture"] = _fixture_point(entry["fixture"], where)
+    ctype = ContactType.parse(entry["contact"])
+    # A fixed fixture side is a known point of the feature: a point feature is its own, and a plane on a
+    # plane touches along a face, where no point is needed.
+    if (ctype.fixture_fixed and ctype.fixture != "P" and {ctype.sensor, ctype.fixture} != {"PL"}
+            and "o" not in contact.get("fixture", {})):
+        raise ValueError(f"{where}: contact {entry['contact']} fixes the fixture side: give its contact point, "
+                         '"fixture": {"o": [x, y, z]} (fixture frame, mm)')
     return contact
 
 
@@ -261,14 +293,29 @@ def _check_id(feature_id, feature_ids, where):
         raise ValueError(f"{where}: unknown feature {feature_id!r}; features are {', '.join(feature_ids)}")
 
 
-def _check_finite(value, where):
+# The numbers of touches.schema.json, by the shape of their lists (None: any length but 0).
+_SHAPES = {(): "a number", (3,): "[x, y, z]", (None, 3): "a list of [x, y, z]"}
+
+
+def _json_array(value, shape, where):
+    """``value`` as touches.schema.json has it, an array: JSON numbers (not strings or booleans) in lists
+    of ``shape``, finite."""
+    if not _fits(value, shape):
+        raise ValueError(f"{where} must be {_SHAPES[shape]}, got {reprlib.repr(value)}")
     try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where} must be numbers, got {value!r}") from None
-    if array.size == 0 or not np.all(np.isfinite(array)):
-        raise ValueError(f"{where} must be finite numbers, got {value!r}")
+        array = np.array(value, dtype=float)
+    except OverflowError:  # an integer of hundreds of digits
+        array = np.array(np.inf)
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{where} must be finite numbers, got {reprlib.repr(value)}")
     return array
+
+
+def _fits(value, shape):
+    if not shape:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return (isinstance(value, list) and 0 < len(value) == (shape[0] or len(value))
+            and all(_fits(item, shape[1:]) for item in value))
 
 
 def read_touch_file(path, features):
@@ -350,7 +397,8 @@ def search_line(result):
 
 
 def format_result(result, pose_format="matrix"):
-    """A short human-readable report of a registration result, the pose in a controller's convention."""
+    """A short human-readable report of a registration result, the pose in a controller's convention
+    (``pose_format`` None: without the pose)."""
     from .controllers import format_pose
 
     lines = [f"status: {result['status']}", search_line(result),
@@ -361,7 +409,8 @@ def format_result(result, pose_format="matrix"):
         )
     rows = result.get("touch_rows")
     if result["pose"] is not None:
-        lines.append(format_pose(pose_format, result["pose"], result["covariance"]))
+        if pose_format is not None:
+            lines.append(format_pose(pose_format, result["pose"], result["covariance"]))
     elif result["flagged"]:
         lines.append("pose: none (several touches could each explain the inconsistency: see flagged)")
     else:
@@ -473,9 +522,18 @@ def target(sigma_mm, sigma_deg):
 
 def report(result, pose_format="matrix", as_json=False):
     """What the command line prints: the JSON result (with the pose in ``pose_format`` under
-    ``controller``: its numbers, their sigmas and the text) or the human-readable report."""
+    ``controller``: its numbers, their sigmas and the text) or the human-readable report; with the
+    pose format ``json`` that is JSON too, the pose's object with ``status`` and the report's other
+    lines (``report``) in it, so that stdout parses."""
     if not as_json:
-        return format_result(result, pose_format)
+        if pose_format != "json":
+            return format_result(result, pose_format)
+        from .controllers import format_pose, json_lines
+
+        document = {"status": result["status"], "report": format_result(result, None).splitlines()}
+        if result["pose"] is not None:
+            document.update(json.loads(format_pose("json", result["pose"], result["covariance"])))
+        return json_lines(document)
     from .controllers import format_pose, sigmas_from_covariance, values_from_pose
 
     if result["pose"] is None:

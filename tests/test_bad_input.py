@@ -9,10 +9,11 @@ import subprocess
 import sys
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 
-from cli import assert_bad_input, run
+from cli import assert_bad_input, assert_fault, run
 
 
 @pytest.fixture
@@ -124,6 +125,9 @@ JSON_CASES = {
                               "non-zero"),
     "feature a list": ({"touches": [{"feature": ["top"], "points": [[1, 2, 50]]}]}, "unknown feature"),
     "not an object": ([1, 2], "object"),
+    "fixed fixture side without its point": ({"touches": [{"feature": "top", "contact": "S/F-PL/F", "points": [[1, 2, 50]],
+                                                          "sensor": {"kind": "sphere", "center": [1, 2, 53], "radius": 3}}] * 6},
+                                             '"fixture": {"o"'),
     "huge": ({"touches": [{"feature": "top", "points": [[1e302, 2, 50]] * 6}]}, "beyond"),
 }
 
@@ -204,3 +208,171 @@ def test_replaced_files_are_ordinary_files(built, tmp_path):
     os.umask(mask)
     for name in ("simulation.json", "simulation.png"):
         assert stat.S_IMODE((tmp_path / "sim" / name).stat().st_mode) == 0o666 & ~mask
+
+
+# Issue 22: the last tracebacks.
+
+FULL_DISK = """import errno, os, pathlib
+_write_text = pathlib.Path.write_text
+def _full(self, *args, **kwargs):
+    if self.name == {name!r}:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
+    return _write_text(self, *args, **kwargs)
+pathlib.Path.write_text = _full
+"""
+
+
+@pytest.mark.parametrize("name", ["features.json", "register.py"])  # written by calibrate, by its side process
+def test_calibrate_on_a_full_disk(cube, tmp_path, name):
+    """A full disk is the machine's fault: exit 1 with the reason, and no as-built folder."""
+    (tmp_path / "site").mkdir()
+    (tmp_path / "site" / "sitecustomize.py").write_text(FULL_DISK.format(name=name))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path / "site"), os.environ.get("PYTHONPATH")]))}
+    out = run("calibrate", cube, cube / "touches.template.csv", "--out", tmp_path / "asbuilt", env=env)
+    assert_fault(out, "cannot write", "No space left on device")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cube", "site"]
+
+
+def test_simulate_into_a_read_only_folder(cube, tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    with _read_only(locked):
+        assert_bad_input(run("simulate", cube, "--trials", 2, "--out", locked), "cannot write in")
+        assert list(locked.iterdir()) == []
+
+
+def test_a_csv_field_over_the_csv_limit(cube, tmp_path):
+    path = touches_csv(cube, tmp_path / "t.csv", ["top,1" + "0" * 140_000 + ",0,50"])
+    assert_bad_input(run("register", cube, path), "row 2", "field limit")
+    assert_bad_input(run("calibrate", cube, path, "--out", tmp_path / "asbuilt"), "row 2", "field limit")
+    assert not (tmp_path / "asbuilt").exists()
+
+
+def test_deeply_nested_json(cube, tmp_path):
+    path = tmp_path / "touches.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    assert_bad_input(run("register", cube, path), "nested too deeply")
+    (cube / "features.json").write_text(path.read_text())
+    assert_bad_input(run("simulate", cube, "--trials", 2), "features.json")
+
+
+def test_touch_plan_names_a_plan_not_a_path(cube):
+    (cube / "plans").mkdir()
+    assert_bad_input(run("simulate", cube, "--trials", 2, "--touch-plan", "../features"), "unknown touch plan")
+    (cube / "plans" / "mine.json").write_text('{"note": "not a plan"}')
+    assert_bad_input(run("simulate", cube, "--trials", 2, "--touch-plan", "mine"), "mine.json", "not a touch plan")
+    assert not (cube / "simulation.json").exists()
+
+
+def test_design_seed_must_not_be_negative(tmp_path):
+    assert_bad_input(run("design", "--class", "{S-T2}x3 {S-S}x3", "--seed", -1, "--out", tmp_path / "d"), "--seed")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_register_py_without_numpy(cube):
+    """Python without its site packages has no numpy: register.py says so in one line, exit 1."""
+    out = subprocess.run([sys.executable, "-I", "-S", str(cube / "register.py"), str(cube / "touches.template.csv")],
+                         capture_output=True, text=True)
+    assert_fault(out, "numpy is not installed", "pip install numpy scipy")
+
+
+PLANE = {"feature": "top", "contact": "PL/F-PL/F", "sensor": {"kind": "plane", "point": [1, 2, 50], "normal": [0, 0, 1]}}
+# Touch files the shipped touches.schema.json rejects, made from a build's valid touches.template.json.
+SCHEMA_CASES = {
+    "rho a string": (lambda doc: doc["touches"][0].update(rho="x"), "rho"),
+    "rho a list": (lambda doc: doc["touches"][0].update(rho=[1]), "rho"),
+    "rho a boolean": (lambda doc: doc["touches"][0].update(rho=True), "rho"),
+    "coordinate a string": (lambda doc: doc["touches"][0]["points"][0].__setitem__(0, "1"), "points"),
+    "coordinate a boolean": (lambda doc: doc["touches"][0]["points"][0].__setitem__(0, True), "points"),
+    "point of two numbers": (lambda doc: doc["touches"][0]["points"].__setitem__(0, [1, 2]), "points"),
+    "no points": (lambda doc: doc["touches"][0].update(points=[]), "points"),
+    "unknown top-level key": (lambda doc: doc.update(units="mm"), "units"),
+    "fixture with another key": (lambda doc: doc["touches"][0].update(fixture={"u": [0, 0, 1]}), "fixture"),
+    "fixture point of two": (lambda doc: doc["touches"][0].update(fixture={"o": [0, 0]}), "fixture"),
+    "sensor with approaches": (lambda doc: doc["touches"].append({**PLANE, "approaches": [[0, 0, -1]]}), "approaches"),
+    "sensor point of two": (lambda doc: doc["touches"].append({**PLANE, "sensor": {**PLANE["sensor"], "point": [1, 2]}}),
+                            "sensor point"),
+    "sensor radius negative": (lambda doc: doc["touches"].append(
+        {"feature": "top", "contact": "S/M-PL/M", "sensor": {"kind": "sphere", "center": [1, 2, 53], "radius": -3}}),
+        "sensor radius"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SCHEMA_CASES))
+def test_touch_files_are_checked_against_the_shipped_schema(cube, tmp_path, case):
+    """Whatever touches.schema.json rejects, register and register.py refuse in one line."""
+    from importlib import resources
+
+    from jsonschema import Draft202012Validator
+
+    schema = json.loads(resources.files("fixturecad").joinpath("schema/touches.schema.json").read_text())
+    document = json.loads((cube / "touches.template.json").read_text())
+    assert Draft202012Validator(schema).is_valid(document)
+    change, words = SCHEMA_CASES[case]
+    change(document)
+    assert not Draft202012Validator(schema).is_valid(document)
+    path = tmp_path / "touches.json"
+    path.write_text(json.dumps(document))
+    assert_bad_input(run("register", cube, path), words)
+    out = subprocess.run([sys.executable, str(cube / "register.py"), str(path)], capture_output=True, text=True)
+    assert out.returncode == 2 and len(out.stderr.splitlines()) == 1 and words in out.stderr, out.stderr
+
+
+def test_an_approach_of_zero_is_refused(cube, tmp_path):
+    rows = [line + ",0,0,-1" for line in (cube / "touches.template.csv").read_text().splitlines()
+            if line and not line.startswith(("#", "feature"))]
+    rows[3] = rows[3].removesuffix(",0,0,-1") + ",0,0,0"
+    path = tmp_path / "t.csv"
+    path.write_text("feature,x,y,z,ax,ay,az\n" + "\n".join(rows) + "\n")
+    assert_bad_input(run("register", cube, path), "row 5", "approach", "zero")
+    document = json.loads((cube / "touches.template.json").read_text())
+    document["touches"][0]["approaches"] = [[0, 0, -1]] * 3 + [[0, 0, 0]]
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps(document))
+    assert_bad_input(run("register", cube, path), "touch 1", "[0, 0, 0]")
+
+
+def test_suggest_and_design_agree_on_what_a_class_is(tmp_path):
+    """A class outside Table V that no template realises: the same one line, exit 2, from both."""
+    suggest = run("suggest", "{S-T2}x5")
+    design = run("design", "--class", "{S-T2}x5", "--out", tmp_path / "d")
+    for out in (suggest, design):
+        assert_bad_input(out, "{S-T2}x5 is not a class of Table V")
+    assert suggest.stderr == design.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def _until_it_catches_sigterm(process):
+    """Wait until the process handles SIGTERM (Python does not by default): its first instruction has run."""
+    status = Path(f"/proc/{process.pid}/status")
+    if not status.exists():
+        pytest.skip("no /proc to see a process's signal handlers")
+    deadline = time.monotonic() + 60
+    while not int(next(line for line in status.read_text().splitlines() if line.startswith("SigCgt:")).split()[1],
+                  16) >> (signal.SIGTERM - 1) & 1:
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.001)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("delay", [0.0, 1.0])  # in the imports (trimesh's swallowed Ctrl-C), or in the trials
+def test_an_interrupted_simulate_says_so_and_writes_nothing(cube, signum, delay):
+    process = subprocess.Popen([sys.executable, "-c", "from fixturecad.cli import main; main()", "simulate", str(cube),
+                                "--trials", "1000"], stderr=subprocess.PIPE, text=True)
+    _until_it_catches_sigterm(process)
+    time.sleep(delay)
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signum
+    assert stderr == "fixturecad: interrupted; nothing was written\n"
+    assert not [p.name for p in cube.iterdir() if "simulation" in p.name]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_register_py_says_so(cube, signum):
+    process = subprocess.Popen([sys.executable, str(cube / "register.py"), str(cube / "touches.template.csv")],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    _until_it_catches_sigterm(process)
+    process.send_signal(signum)
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signum and stdout == "" and stderr == "register.py: interrupted\n"

@@ -71,6 +71,24 @@ def test_register_command_wraps_the_generated_routine(built, tmp_path):
     assert text.returncode == 0 and "status: unique" in text.stdout
 
 
+def test_format_json_prints_only_json(built, tmp_path):
+    """--format json: stdout parses, the status and the report's lines inside, for the CLI and register.py."""
+    import subprocess
+    import sys
+
+    folder = built("cube")
+    underdetermined = tmp_path / "same.csv"
+    underdetermined.write_text("feature,x,y,z\n" + "top,10,10,50\n" * 6)
+    for touches, status, code in ((folder / "touches.template.csv", "unique", 0), (underdetermined, "underdetermined", 4)):
+        for out in (run("register", folder, touches, "--format", "json"),
+                    subprocess.run([sys.executable, str(folder / "register.py"), str(touches), "--format", "json"],
+                                   capture_output=True, text=True)):
+            assert out.returncode == code, out.stderr
+            document = json.loads(out.stdout)
+            assert document["status"] == status and f"status: {status}" in document["report"]
+            assert "quaternion_wxyz" in document and "sigma" in document
+
+
 @pytest.mark.parametrize(
     "content,words",
     [

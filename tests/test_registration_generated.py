@@ -246,4 +246,4 @@ def test_register_py_embeds_every_module_its_modules_import():
             if isinstance(node, ast.Import) or (isinstance(node, ast.ImportFrom) and node.level == 0):
                 top = (node.module if isinstance(node, ast.ImportFrom) else node.names[0].name).split(".")[0]
                 assert top in ("numpy", "scipy", "math", "dataclasses", "functools", "argparse", "csv", "io",
-                               "json", "os", "sys", "warnings"), (name, top)
+                               "json", "os", "reprlib", "sys", "warnings"), (name, top)
