@@ -18,7 +18,7 @@ from .search import mahalanobis, search
 from .starts import best_starts, initial_poses
 from .verdict import CHI2_CONFIDENCE, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, chi_square_quantile, judged, same_pose
 
-LOCAL_STARTS = 24  # closed-form starts refined when the search does not complete
+LOCAL_STARTS = 96  # closed-form starts refined when the search does not complete
 
 
 class Solutions(list):
@@ -78,6 +78,14 @@ def solve(problem, initial_pose=None, complete=True):
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
     if solutions.complete:
         solutions.extent_mm = max(reach, default=0.0)
+        if any(g.points is None for g in problem.groups) and any(s.wide for s in solutions):
+            # The region is the point touches' alone: the sensors' rows may fix the pose within it, or leave two
+            # poses there; the search cannot tell which, so it claims neither (exit 6, not underdetermined).
+            solutions.search = "incomplete"
+            solutions.reason = (f"the sensors are not searched, and the point touches alone leave a region "
+                                f"{solutions.extent_mm:.2f} mm wide")
+            for s in solutions:
+                s.wide = False
     return told_apart(solutions, problem.sigma)
 
 

@@ -24,7 +24,7 @@ PLANE_CYLINDER_STEPS = 180  # axis directions tried on the cone about the plane 
 NORMAL_SWEEP_RAD = np.radians(2.0)  # plane touches this unsure of the normal (3 sigma) sweep it ...
 NORMAL_SWEEP_STEPS = 60  # ... in this many turns about their line
 CIRCLE_ITERATIONS = 6  # Gauss-Newton steps fitting a circle of the cylinder's radius to the touches
-FALLBACK_STARTS = 48  # rotations tried when no plane gives a direction
+FALLBACK_STARTS = 96  # rotations tried when no plane gives a direction
 UNSWEPT_PER_BLOCK = 6  # fallback starts per candidate centre refined before stopping at a solution
 
 
@@ -134,10 +134,12 @@ def _translated(problem, rotations, centres, swept=False, far=False):
     if centres:
         f, ms = centres[0]
         return Starts([(R, m - R @ f) for m in ms for R in rotations], len(ms), swept, far)
-    point_groups = [g for g in problem.groups if g.points is not None]
-    if point_groups:
-        measured = np.concatenate([g.points for g in point_groups]).mean(axis=0)
-        anchors = np.concatenate([np.tile(_anchor(g.feature), (g.count, 1)) for g in point_groups]).mean(axis=0)
+    # Every touch's place in the measurement frame: a point touch's point, a sensor's placement centre (on or
+    # near its contact), against its feature's anchor.
+    placed = [g for g in problem.groups if (g.points if g.points is not None else g.centre) is not None]
+    if placed:
+        measured = np.concatenate([g.points if g.points is not None else g.centre for g in placed]).mean(axis=0)
+        anchors = np.concatenate([np.tile(_anchor(g.feature), (g.count, 1)) for g in placed]).mean(axis=0)
     else:
         measured = anchors = np.zeros(3)
     return Starts([(R, measured - R @ anchors) for R in rotations], 1, swept, far)
