@@ -154,6 +154,7 @@ class Tree:
         self.row_unit = np.array([m for _, m in rows]).reshape(-1, 3)
         self.H_flat = self.row_unit.T @ self.row_unit
         self.H_flat_least = float(max(np.linalg.eigvalsh(self.H_flat)[0], 0.0))
+        self.H_flat_pinv = np.linalg.pinv(self.H_flat, rcond=1e-9)
         bf = b[self.flat]
         inertia = np.sum(self.rho[self.flat] ** 2) * np.eye(3) - bf.T @ bf
         self.flat_swing = float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0)))
@@ -250,30 +251,33 @@ class Tree:
         c.R = rotation_from_vector(v)
         c.a = (self.points - self.centroid) @ c.R  # R0^T b_i
         turn = c.delta[:, None] * self.rho[None]
+        # How far off its element a touch that passes may lie at R0: sqrt(T), its deviation bound and its turn.
+        reach = self.root + self.dev[None] + turn
+        # The flat rows at R0 and y = 0: the row at y is value + m.y.
+        value = np.einsum("ri,kri->kr", self.row_unit, c.a[:, self.row_touch] - self.flat_anchor[self.row_touch])
         # y keeps every touch within reach of its patch's box: each box about y's own axes.
         middle = 0.5 * (self.low + self.high)[None] - c.a
         half = (0.5 * (self.high - self.low) @ np.abs(self.Q))[None] + turn[..., None]
         middle = middle @ self.Q
         lo, hi = middle - half, middle + half
-        # ... and every round touch within sqrt(T), its deviation and its turn of its element: its core within
-        # that of its radius, on the axes its distance depends on.
+        # ... and every round touch within its reach of its element: its core within that of its radius, on the
+        # axes its distance depends on.
         if self.round.any():
-            reach = (self.offset + self.root + self.dev)[None, self.round] + turn[:, self.round]
+            core_reach = self.offset[None, self.round] + reach[:, self.round]
             core = ((self.anchor[self.round])[None] - c.a[:, self.round]) @ self.Q
             axes = np.where(self.aligned[self.round, None], [True, True, False], True)[None]
-            lo[:, self.round] = np.where(axes, np.maximum(lo[:, self.round], core - reach[..., None]), lo[:, self.round])
-            hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + reach[..., None]), hi[:, self.round])
+            lo[:, self.round] = np.where(axes, np.maximum(lo[:, self.round], core - core_reach[..., None]),
+                                         lo[:, self.round])
+            hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + core_reach[..., None]),
+                                         hi[:, self.round])
         c.ylo = np.maximum(c.ylo, np.max(lo, axis=1))
         c.yhi = np.minimum(c.yhi, np.min(hi, axis=1))
-        self.contract(c, turn)
+        self.contract(c, reach, value)
         bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, 0.0)
         # Zeroth order: each touch within its turn of where it is at R0.
         if self.flat.any():
-            z = c.a[:, self.row_touch] - self.flat_anchor[self.row_touch]
-            value = np.einsum("ri,kri->kr", self.row_unit, z)
             # q(y) = sum (value + m.y)^2 >= q_min + h |y - y*|^2 outside the box's reach of y*.
-            H_pinv = np.linalg.pinv(self.H_flat, rcond=1e-9)
-            y_star = -(value @ self.row_unit) @ H_pinv.T
+            y_star = -(value @ self.row_unit) @ self.H_flat_pinv.T
             q_min = np.sum((value + y_star @ self.row_unit.T) ** 2, axis=1)
             y_hat = y_star @ self.Q
             gap = np.maximum(c.ylo - y_hat, 0.0) + np.maximum(y_hat - c.yhi, 0.0)
@@ -303,18 +307,16 @@ class Tree:
         c.bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, c.bound)
         return c
 
-    def contract(self, c, turn):
+    def contract(self, c, reach, value):
         """Shrink the cells' y boxes to the slabs every pose that passes keeps y in: each touch's distance is at
         most ``s_i = sqrt(T) + e_i + delta rho_i`` at ``R0`` (each touch's share of the cost is at most ``T``,
         its turn moves it at most ``delta rho_i``); a flat row ``value + m.y`` lies in ``[-s_i, s_i]``, and two
         round touches on one core, at ``D_i in [r_i - s_i, r_i + s_i]`` from it, have ``D_i^2 - D_j^2 =
         |P u_i|^2 - |P u_j|^2 + 2 P (u_i - u_j) . y`` (``u = a - anchor``, ``P`` the projector across the
         core). Each slab ``l <= g.y <= u`` narrows each axis of the box to what the other axes leave (interval
-        propagation, in rounds over all slabs at once)."""
-        reach = self.root + self.dev[None] + turn  # (K, n)
-        rows = len(self.row_touch)
-        g = np.broadcast_to(self.row_unit @ self.Q, (len(c.v), rows, 3))
-        value = np.einsum("ri,kri->kr", self.row_unit, c.a[:, self.row_touch] - self.flat_anchor[self.row_touch])
+        propagation, in rounds over all slabs at once). ``reach`` (K, n): the ``s_i``; ``value`` (K, rows): the
+        flat rows at ``y = 0``."""
+        g = np.broadcast_to(self.row_unit @ self.Q, (len(c.v), len(self.row_touch), 3))
         low, high = -value - reach[:, self.row_touch], -value + reach[:, self.row_touch]
         if len(self.pairs):
             i, j = self.pairs.T

@@ -134,11 +134,11 @@ def _translated(problem, rotations, centres, swept=False, far=False):
     if centres:
         f, ms = centres[0]
         return Starts([(R, m - R @ f) for m in ms for R in rotations], len(ms), swept, far)
-    # Every touch's place in the measurement frame: a point touch's point, a sensor's placement centre (on or
-    # near its contact), against its feature's anchor.
-    placed = [g for g in problem.groups if (g.points if g.points is not None else g.centre) is not None]
+    # Every touch's place in the measurement frame, its centre (a point touch's point, a sensor's placement
+    # centre, on or near its contact), against its feature's anchor.
+    placed = [g for g in problem.groups if g.centre is not None]
     if placed:
-        measured = np.concatenate([g.points if g.points is not None else g.centre for g in placed]).mean(axis=0)
+        measured = np.concatenate([g.centre for g in placed]).mean(axis=0)
         anchors = np.concatenate([np.tile(_anchor(g.feature), (g.count, 1)) for g in placed]).mean(axis=0)
     else:
         measured = anchors = np.zeros(3)
