@@ -63,6 +63,7 @@ def register(
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
     target_sigma: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS translation standard deviation, mm.")] = None,
     target_sigma_deg: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS rotation standard deviation, deg.")] = None,
+    unlabelled: Annotated[bool, typer.Option(help="Take every point touch as unlabelled: on some plane, sphere or cylinder, not said which (an empty feature in a CSV, null in JSON, is unlabelled already).")] = False,
 ):
     """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py.
 
@@ -75,7 +76,7 @@ def register(
     routine = load_routine(out_dir)
     try:
         result = register_file(routine.FEATURES, routine.register, touches, sigma, lever, ball_radius, fixture_tolerance,
-                               target(target_sigma, target_sigma_deg))
+                               target(target_sigma, target_sigma_deg), unlabelled)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     typer.echo(report(result, pose_format.value, as_json))

@@ -27,6 +27,8 @@ This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 
+import numpy as np
+
 from .ambiguity import explanations, features_beyond_tolerance, separating_touch
 from .least_squares import levenberg_marquardt
 from .motions import free_motions
@@ -36,14 +38,15 @@ from .planning import next_touches
 from .redundancy import redundancy
 from .solve import solve
 from .touches import build_groups
+from .unlabelled import assigned, assigned_problem, check_unlabelled, nearest_assignment, solve_unlabelled
 from .uncertainty import covariance, covariance_from_information, sigmas
 from .verdict import Solution, judged, same_pose
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
                      contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM, tolerance=None, plan_next=False,
-                     target_sigma=None, candidates=None):
-    """Register a fixture from labelled touches; return the result dict (see module doc).
+                     target_sigma=None, candidates=None, unlabelled=None):
+    """Register a fixture from touches, labelled or not; return the result dict (see module doc).
 
     Parameters
     ----------
@@ -63,6 +66,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     target_sigma : (mm, deg) or None, also say in ``target`` whether the pose's standard deviations
         (RMS translation, rotation) meet these and, if not, how many more planned touches are predicted to
         (``more_touches``, None beyond ``MAX_MORE_TOUCHES``)
+    unlabelled : array-like, shape (n, 3), mm, measurement frame, optional: point touches (ball centres with a
+        ball radius) on some plane, sphere or cylinder, not said which; numbered after the labelled touches and
+        the contacts. Every pose that passes under some assignment of them is looked for (:mod:`.unlabelled`)
     candidates : dict id -> array-like, shape (n, 3), mm, fixture frame, optional: the reachable touches the
         next touch and the planned touches are chosen among (features.json's ``touch_candidates``,
         :func:`.planning.stored_candidates`); without them only a separating touch is named
@@ -83,15 +89,28 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     ``residual_mm`` off its feature there), ``culprit`` (the touch index when
     only one touch explains it, else None), ``inadmissible`` (touches off their
     patch or touched from inside at ``pose``), ``touches``, ``rows``, ``rank``,
-    ``redundancy`` (how well the touches check each other, :mod:`.redundancy`);
+    ``redundancy`` (how well the touches check each other, :mod:`.redundancy`), ``assignment`` (with
+    unlabelled touches: each one's ``touch``, ``feature`` and ``residual_mm`` at ``pose``; each of
+    ``solutions`` has its own);
     with no pose, ``rms_residual_mm``, ``inadmissible``, ``rank`` and
     ``redundancy`` are those of the lowest-cost candidate.
     """
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
-    problem = Problem(groups, sigma_mm, lever_mm, tolerance)
-    if not problem.groups:
-        raise ValueError("no touches given: every feature's list of touches is empty")
-    solutions = solve(problem, initial_pose)
+    points = check_unlabelled(unlabelled)
+    index = np.arange(len(points)) + sum(g.count for g in groups)
+    if len(points) and initial_pose is None:
+        solutions = solve_unlabelled(groups, features, points, index, ball_radius_mm, sigma_mm, lever_mm, tolerance)
+        problem = solutions[0].problem
+    else:
+        # Near a nominal pose each unlabelled touch is on the feature it lies nearest to there.
+        assignment = nearest_assignment(features, points, initial_pose, ball_radius_mm) if len(points) else ()
+        problem = assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
+                                   tolerance)
+        if not problem.groups:
+            raise ValueError("no touches given: every feature's list of touches is empty")
+        solutions = solve(problem, initial_pose)
+        for s in solutions:
+            s.assignment, s.problem = assignment, problem
     best = solutions[0]
     result = {"flagged": [], "culprit": None, "fixture_flagged": [], "free_motions": [], "separating_touch": None}
     good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
@@ -127,7 +146,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
                 result["separating_touch"] = separating_touch(features, missed)
         else:
             status = "inconsistent"
-            feature_of = {int(i): g.feature.id for g in groups for i in g.index}
+            feature_of = {int(i): g.feature.id for g in problem.groups for i in g.index}
             result["flagged"] = [{"touch": touch, "feature": feature_of[touch], "relabel": relabel,
                                   "residual_mm": size, "pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms}
                                  for touch, relabel, s, size in explained]
@@ -154,11 +173,13 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "status": status,
             "inadmissible": sorted(answer.outside),
             "rms_residual_mm": answer.rms,
-            "solutions": [{"pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms} for s in shown],
+            "solutions": [{"pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms,
+                           **({"assignment": assigned(features, s, points, index, ball_radius_mm)} if len(points) else {})}
+                          for s in shown],
             "covariance": None if cov is None else cov.tolist(),
             "sigma_translation_mm": s_t,
             "sigma_rotation_deg": s_r,
-            "touches": int(sum(g.count for g in groups)),
+            "touches": int(sum(g.count for g in problem.groups)),
             "rows": problem.size,
             "rank": answer.rank,
             "redundancy": redundancy(problem, checked or answer),
@@ -167,6 +188,8 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "search_extent_mm": solutions.extent_mm,
         }
     )
+    if len(points):
+        result["assignment"] = assigned(features, answer, points, index, ball_radius_mm)
     if best is None:
         return result  # no pose to plan the next touch or a target from
     if plan_next:

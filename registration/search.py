@@ -98,10 +98,27 @@ def search(problem, threshold):
     return tree.regions()
 
 
-class Tree:
-    """The branch and bound of the module doc over one problem's point and ball touches."""
+def first_cells():
+    """The first level's cells: rotation boxes over [-pi, pi]^3 (those that hold a rotation vector within pi),
+    each with an unbounded y box: (v, w, ylo, yhi)."""
+    w = np.pi / FIRST_CELLS
+    axis = -np.pi + w * (2 * np.arange(FIRST_CELLS) + 1)
+    v = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    v = v[np.linalg.norm(v, axis=1) - np.sqrt(3.0) * w <= np.pi]
+    return v, np.full(len(v), w), np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
 
-    def __init__(self, problem, threshold):
+
+def beyond_pi(v, w):
+    """Whether each rotation box lies wholly beyond pi, where every rotation has a rotation vector: it holds
+    none that needs looking at."""
+    return np.linalg.norm(np.maximum(np.abs(v) - w[:, None], 0.0), axis=1) > np.pi
+
+
+class Tree:
+    """The branch and bound of the module doc over one problem's point and ball touches (``centroid``: the
+    point whose image is y, by default theirs)."""
+
+    def __init__(self, problem, threshold, centroid=None):
         groups = [g for g in problem.groups if g.points is not None]
         self.problem = Problem(groups, problem.sigma, problem.lever)
         self.judge = Problem(groups, problem.sigma, problem.lever, problem.tolerance)  # the test, deviations and all
@@ -110,7 +127,8 @@ class Tree:
             self.fixes_pose = False
             return
         self.points = np.concatenate([g.points for g in groups])
-        self.centroid = self.points.mean(axis=0)
+        # y is the image of this point: the touches' centroid, or one that several trees share (:mod:`.unlabelled`).
+        self.centroid = self.points.mean(axis=0) if centroid is None else np.asarray(centroid, float)
         # Whether the rows can fix a pose: their largest rank at a few rotations (it drops at special ones),
         # the touches' centroid on the touched patches' centre.
         middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
@@ -190,9 +208,7 @@ class Tree:
     def modes(self, groups, tolerance, q):
         """A printed part's deviation modes, as the first-order model carries them: ``L`` (k, k') with
         ``L L^T`` the touched features' mode covariance S; each touch's modes' twists (n, k, 6) and radius
-        flags (n, k); each touch's deviation bound ``dev`` = ``e_i = sqrt(q D_i)`` (mm, ``D_i`` the largest
-        variance of its feature's deviation across its rows over its patch: at the patch box's corners for a
-        plane, where it is convex, on the patch grid otherwise) and ``tilt`` = the largest turn (rad) of its
+        flags (n, k); each touch's deviation bound ``dev`` (mm, :func:`deviation_bound`) and ``tilt`` = the largest turn (rad) of its
         feature that a pose that passes allows, ``sqrt(q lambda_max)`` of its turn's covariance."""
         n = sum(g.count for g in groups)
         self.dev, self.tilt, self.L = np.zeros(n), np.zeros(n), None
@@ -215,12 +231,7 @@ class Tree:
             rows = slice(first, first + g.count)
             self.mode_twists[rows, columns] = m.twists
             self.mode_radius[rows, columns] = m.radius
-            if g.feature.kind == "plane":
-                low, high = patch_box(g.feature)
-                points = np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
-            else:
-                points = patch_points(g.feature)
-            self.dev[rows] = np.sqrt(q * largest_row_variance(tolerance, g.feature, points))
+            self.dev[rows] = deviation_bound(tolerance, g.feature, q)
             turn = m.twists[:, :3]
             s = tolerance.covariance[tolerance.slices[f], tolerance.slices[f]]
             self.tilt[rows] = np.sqrt(q * max(np.linalg.eigvalsh(turn.T @ s @ turn)[-1], 0.0))
@@ -432,6 +443,15 @@ class Tree:
         terms = np.where((shifted <= 0.0) & (beta2 > 1e-30), np.inf, terms)
         c.least = np.maximum(c.Q0 - np.sum(terms, axis=1) - lam * c.delta**2, 0.0)
 
+    @staticmethod
+    def turned(lo, hi, Q):
+        """Boxes (lo, hi) on one set of axes held in boxes on axes turned by Q (columns: the old axes on the
+        new, ``Q`` to the tree's axes, ``Q.T`` back)."""
+        finite = np.all(np.isfinite(lo) & np.isfinite(hi), axis=1)[:, None]
+        centre = np.where(finite, 0.5 * (lo + hi), 0.0) @ Q
+        half = np.where(finite, np.where(finite, 0.5 * (hi - lo), 0.0) @ np.abs(Q), np.inf)
+        return centre - half, centre + half
+
     def box_centre(self, c):
         """The centres (K, 3) of the cells' y boxes, fixture frame (0 along an unbounded axis)."""
         centre = 0.5 * (c.ylo + c.yhi)
@@ -478,13 +498,6 @@ class Tree:
 
     # --- the search ----------------------------------------------------------------------------------------
 
-    def first_cells(self):
-        w = np.pi / FIRST_CELLS
-        axis = -np.pi + w * (2 * np.arange(FIRST_CELLS) + 1)
-        v = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
-        v = v[np.linalg.norm(v, axis=1) - np.sqrt(3.0) * w <= np.pi]
-        return v, np.full(len(v), w), np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
-
     def leaves(self, v, w, ylo, yhi, fraction, kept):
         """The leaf cells (:class:`Cells`) grown from the given cells: split until their model's remainder is at
         most ``fraction sqrt(T)``; the cells kept per level are added to ``kept``. None when the search stops
@@ -493,9 +506,7 @@ class Tree:
         for _ in range(MAX_LEVELS):
             # The cheap zeroth-order bound first; the first-order model only for the cells it keeps.
             c = self.zeroth_bound(Cells(v, w, ylo, yhi))
-            # Every rotation has a rotation vector within pi: a box wholly beyond holds none that need looking at.
-            beyond = np.linalg.norm(np.maximum(np.abs(c.v) - c.w[:, None], 0.0), axis=1) > np.pi
-            c = self.first_bound(c.take((c.zeroth <= self.root**2) & ~beyond))
+            c = self.first_bound(c.take((c.zeroth <= self.root**2) & ~beyond_pi(c.v, c.w)))
             c = c.take(c.bound <= self.root**2)
             kept.append(len(c.v))
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
@@ -510,12 +521,15 @@ class Tree:
             turning = turn >= shift
             if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS or sum(len(d.v) for d in done) > MAX_LEAVES:
                 return None, f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
-            v, w, ylo, yhi = _split(c.v, c.w, c.ylo, c.yhi, turning, self.relevant)
+            v, w, ylo, yhi = split(c.v, c.w, c.ylo, c.yhi, turning, self.relevant)
         return None, f"cells still wider than a leaf after {MAX_LEVELS} levels"
 
-    def regions(self):
+    def regions(self, start=None):
+        """:class:`Regions` over the cells ``start`` (v, w, ylo, yhi; the y boxes on the fixture frame's axes),
+        or over every rotation and image."""
         kept = []
-        leaves, reason = self.leaves(*self.first_cells(), LEAF_FRACTION, kept)
+        start = first_cells() if start is None else (start[0], start[1], *self.turned(start[2], start[3], self.Q))
+        leaves, reason = self.leaves(*start, LEAF_FRACTION, kept)
         if leaves is None:
             return Regions(complete=False, reason=reason, cells=kept)
         fraction = LEAF_FRACTION
@@ -628,6 +642,18 @@ class Tree:
         return Rs, ts
 
 
+def deviation_bound(tolerance, feature, q):
+    """A touch's deviation bound ``e = sqrt(q D)`` (mm) on a printed feature, ``D`` the largest variance of the
+    feature's deviation across its rows over its patch: at the patch box's corners for a plane, where it is
+    convex, on the patch grid otherwise."""
+    if feature.kind == "plane":
+        low, high = patch_box(feature)
+        points = np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
+    else:
+        points = patch_points(feature)
+    return np.sqrt(q * largest_row_variance(tolerance, feature, points))
+
+
 @dataclass
 class Region:
     """Joined leaves: the pose refined from the best of them, whether it passes (each distance less its deviation
@@ -669,7 +695,7 @@ def _skew(a):
     return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
 
 
-def _split(v, w, ylo, yhi, turning, relevant):
+def split(v, w, ylo, yhi, turning, relevant):
     """Rotation boxes of ``turning`` cells in eight, the others' y boxes in two across their widest ``relevant``
     axis."""
     half = 0.5 * w[turning]

@@ -42,11 +42,12 @@ def threshold_mm2(problem):
     return problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
 
 
-def solve(problem, initial_pose=None, complete=True):
+def solve(problem, initial_pose=None, complete=True, found=None):
     """All distinct solutions, best first (:class:`Solutions`).
 
     ``initial_pose``: refine from it only. ``complete``: without a nominal pose, search every pose that
-    passes (:mod:`.search`); else refine the closed-form starts only (the explanations' quick refits).
+    passes (:mod:`.search`; ``found``: its :class:`.search.Regions`, searched already); else refine the
+    closed-form starts only (the explanations' quick refits).
     """
     solutions = Solutions()
     starts, extents = [], []
@@ -54,7 +55,7 @@ def solve(problem, initial_pose=None, complete=True):
         T = check_fixture2meas(initial_pose)
         starts, solutions.search = [(T[:3, :3], T[:3, 3])], "nominal"
     elif complete:
-        found = search(problem, threshold_mm2(problem))
+        found = search(problem, threshold_mm2(problem)) if found is None else found
         starts, extents, solutions.cells = found.poses, found.extents_mm, found.cells
         solutions.search = "complete" if found.complete else "incomplete"
         solutions.reason = found.reason

@@ -55,7 +55,8 @@ def exit_code(result):
 
 def read_touch_csv(text, feature_ids):
     """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
-    file row (line number) of every touch by feature id (lists)."""
+    file row (line number) of every touch by feature id (lists); an empty feature is an unlabelled
+    touch, under the id None."""
     text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8" starts with a byte order mark
     reader = csv.reader(io.StringIO(text))
     try:
@@ -78,7 +79,9 @@ def read_touch_csv(text, feature_ids):
     for line, row in numbered[1:]:
         if len(row) != width:
             raise ValueError(f"row {line}: expected {width} values ({','.join(header)}), got {len(row)}")
-        _check_id(row[0].strip(), feature_ids, f"row {line}")
+        label = row[0].strip() or None  # an empty feature: an unlabelled touch
+        if label is not None:
+            _check_id(label, feature_ids, f"row {line}")
         try:
             values = [float(cell) for cell in row[1:]]
         except ValueError:
@@ -88,9 +91,9 @@ def read_touch_csv(text, feature_ids):
         _check_range(np.array(values), f"row {line}")
         if width == 7 and not any(values[3:]):
             raise ValueError(f"row {line}: the approach direction ax,ay,az is zero: give the direction the probe moved")
-        touches.setdefault(row[0].strip(), []).append(values[:3])
-        approaches.setdefault(row[0].strip(), []).append(values[3:] or [np.nan] * 3)
-        lines.setdefault(row[0].strip(), []).append(line)
+        touches.setdefault(label, []).append(values[:3])
+        approaches.setdefault(label, []).append(values[3:] or [np.nan] * 3)
+        lines.setdefault(label, []).append(line)
     if not touches:
         raise ValueError("the touch file has a header but no touches")
     arrays = {key: np.array(value) for key, value in approaches.items()}
@@ -145,8 +148,13 @@ def read_touch_json(text, features):
         if unknown:
             hint = ' (a list of points is "points": [[x, y, z], ...], as in the touch plans)' if "point" in unknown else ""
             raise ValueError(f"{where}: unknown key {sorted(unknown)[0]!r}{hint}; keys are {', '.join(sorted(ENTRY_KEYS))}")
-        _check_id(entry.get("feature"), features, where)
-        _check_contact(entry, features[entry["feature"]], radius, where)
+        if entry.get("feature", "") is None:
+            if {"contact", "sensor", "rho", "fixture"} & set(entry):
+                raise ValueError(f"{where}: an unlabelled touch (feature null) is the probe's: no contact, sensor, "
+                                 f"rho or fixture")
+        else:
+            _check_id(entry.get("feature"), features, where)
+            _check_contact(entry, features[entry["feature"]], radius, where)
         points = _points(entry, "points", where, required="sensor" not in entry)
         if "rho" in entry:
             _json_array(entry["rho"], (), f"{where}: rho")
@@ -178,7 +186,9 @@ def read_touch_json(text, features):
     arrays = {key: np.array(value, dtype=float) for key, value in approaches.items()}
     if all(np.isnan(a).all() for a in arrays.values()):
         arrays = {}
-    rows = [label for key in touches for label in labels[key]] + contact_labels
+    # The engine's order: labelled point touches by feature, the contacts, the unlabelled touches.
+    rows = [label for key in touches if key is not None for label in labels[key]] + contact_labels \
+        + labels.get(None, [])
     return {key: np.array(value) for key, value in touches.items()}, contacts, radius, arrays, rows
 
 
@@ -323,7 +333,8 @@ def read_touch_file(path, features):
     ``features`` (dict id -> feature).
 
     ``rows`` names every touch in the engine's order (point touches by feature,
-    then the contacts) by where it is in the file: ``row 8 of touches.csv``.
+    then the contacts, then the unlabelled touches: those under the id None) by
+    where it is in the file: ``row 8 of touches.csv``.
     """
     try:
         with open(path, encoding="utf-8") as handle:
@@ -337,7 +348,8 @@ def read_touch_file(path, features):
         touches, contacts, radius, approaches, labels = read_touch_json(text, features)
         return touches, contacts, radius, approaches, [f"{label} of {name}" for label in labels]
     touches, approaches, lines = read_touch_csv(text, features)
-    return touches, [], 0.0, approaches, [f"row {line} of {name}" for key in touches for line in lines[key]]
+    order = [key for key in touches if key is not None] + [None] * (None in touches)
+    return touches, [], 0.0, approaches, [f"row {line} of {name}" for key in order for line in lines[key]]
 
 
 def check_enough(features, touches, contacts, ball_radius_mm):
@@ -345,18 +357,21 @@ def check_enough(features, touches, contacts, ball_radius_mm):
     from .problem import Problem
     from .touches import build_groups
 
-    rows = Problem(build_groups(features, touches, ball_radius_mm, contacts)).size
+    labelled = {key: value for key, value in touches.items() if key is not None}
+    # An unlabelled touch lies on a surface: one row.
+    rows = Problem(build_groups(features, labelled, ball_radius_mm, contacts)).size + len(touches.get(None, ()))
     if rows < MIN_ROWS:
         count = sum(len(v) for v in touches.values()) + len(contacts)
         raise ValueError(f"too few touches: {count} touches give {rows} constraints, a pose needs at least {MIN_ROWS}")
 
 
 def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM,
-                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None):
+                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None, unlabelled=False):
     """Check the options, read a touch file and register it; the result names every touch's row
     (``rows``, in the engine's touch order) and each flagged touch's.
 
-    ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None. The result
+    ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None.
+    ``unlabelled``: take every point touch as unlabelled, its feature not said. The result
     has ``next_touch`` (see ``register_touches``). Errors are one-line ``ValueError``.
     """
     if not 0 < sigma_mm < np.inf:
@@ -371,10 +386,19 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
         raise ValueError(f"--target-sigma and --target-sigma-deg must be positive numbers, got {target_sigma}")
     touches, contacts, radius, approaches, rows = read_touch_file(path, features)
     radius = radius if ball_radius_mm is None else ball_radius_mm
+    if unlabelled and touches:
+        # Every point touch unlabelled, in the file's order of them; the contacts now come first.
+        labelled = sum(len(v) for key, v in touches.items() if key is not None)
+        rows = rows[labelled:labelled + len(contacts)] + rows[:labelled] + rows[labelled + len(contacts):]
+        touches = {None: np.concatenate([v for key, v in touches.items() if key is not None]
+                                        + ([touches[None]] if None in touches else []))}
+        approaches = {}
     check_enough(features, touches, contacts, radius)
+    points = touches.pop(None, None)
+    approaches.pop(None, None)
     result = register(touches, sigma_mm=sigma_mm, ball_radius_mm=radius, contacts=contacts,
                       approaches=approaches, lever_mm=lever_mm, fixture_tolerance_mm=fixture_tolerance_mm,
-                      plan_next=True, target_sigma=target_sigma)
+                      plan_next=True, target_sigma=target_sigma, **({} if points is None else {"unlabelled": points}))
     result["touch_rows"] = rows
     for flag in result["flagged"]:
         flag["row"] = rows[flag["touch"]]
@@ -415,6 +439,9 @@ def format_result(result, pose_format="matrix"):
         lines.append("pose: none (several touches could each explain the inconsistency: see flagged)")
     else:
         lines.append("pose: none (no single touch, label or printed feature explains the inconsistency)")
+    for touch in result.get("assignment", []):
+        where = rows[touch["touch"]] if rows else f"touch {touch['touch']}"
+        lines.append(f"assigned: {where} on {touch['feature']} ({touch['residual_mm']:+.4f} mm)")
     if len(result["solutions"]) > 1:
         lines.append(f"{len(result['solutions'])} solutions pass the residual test")
     for motion in result["free_motions"]:
@@ -497,12 +524,15 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
                         help="accuracy wanted: RMS translation standard deviation, mm")
     parser.add_argument("--target-sigma-deg", type=float, default=None,
                         help="accuracy wanted: RMS rotation standard deviation, deg")
+    parser.add_argument("--unlabelled", action="store_true",
+                        help="take every point touch as unlabelled: on some plane, sphere or cylinder, not said which")
     args = parser.parse_args(argv)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # a user sees the result and one-line errors, never Python warnings
             result = register_file(features, register, args.touches, args.sigma, args.lever, args.ball_radius,
-                                   args.fixture_tolerance, target(args.target_sigma, args.target_sigma_deg))
+                                   args.fixture_tolerance, target(args.target_sigma, args.target_sigma_deg),
+                                   args.unlabelled)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2

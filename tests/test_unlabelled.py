@@ -1,0 +1,120 @@
+"""Unlabelled touches: every pose that passes under some assignment, found, with the assignment reported.
+
+Independent answers: the true pose the touches were made at, and the cube's own symmetry (its three
+sensing faces meet at a corner, so the three-fold turn about the corner's diagonal maps each face onto
+the next: three poses fit the same unlabelled touches exactly).
+"""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fixturecad.registration.engine import register_touches
+from fixturecad.registration.generate import write_register_script
+from fixturecad.registration.patches import patch_points
+from fixturecad.registration.pose import fixture2meas_from_rt, pose_errors, random_rotation
+from fixturecad.registration.touchfile import read_touch_csv, read_touch_json
+
+templates = pytest.importorskip("fixturecad.templates")
+build = pytest.importorskip("fixturecad.build")
+from fixturecad.registration.features import features_from_json  # noqa: E402
+
+SIGMA_MM = 0.005
+
+
+def _case(name, counts, seed, noise_mm=0.0):
+    """A template's features, a random true pose, touches drawn on the patches (measurement frame) by
+    feature, noise added."""
+    document = build.features_document(templates.make(name))
+    features = features_from_json(document)
+    rng = np.random.default_rng(seed)
+    R, t = random_rotation(rng), rng.uniform(-80.0, 80.0, 3)
+    touches = {}
+    for fid, n in counts.items():
+        points = patch_points(features[fid])
+        touches[fid] = points[rng.choice(len(points), n, replace=False)] @ R.T + t + rng.normal(0, noise_mm, (n, 3))
+    return document, features, fixture2meas_from_rt(R, t), touches
+
+
+def _within(pose, truth, mm=1e-3, deg=1e-3):
+    dt, dr = pose_errors(np.array(pose), truth)
+    return dt < mm and dr < deg
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_cube_unlabelled_gives_the_three_poses_its_symmetry_allows(seed):
+    _, features, truth, touches = _case("cube", {"top": 3, "front": 3, "left": 3}, seed)
+    result = register_touches(features, {}, unlabelled=np.concatenate(list(touches.values())), sigma_mm=SIGMA_MM)
+    assert result["status"] == "ambiguous" and result["search"] == "complete"
+    poses = [np.array(s["pose"]) for s in result["solutions"]]
+    assert len(poses) == 3
+    assert any(_within(p, truth) for p in poses)
+    # The other two fit as exactly: the touches cannot tell them from the truth.
+    assert all(s["rms_residual_mm"] < 1e-5 for s in result["solutions"])
+    # Each solution says where each touch went, and every touch lies on its feature.
+    for s in result["solutions"]:
+        assert sorted(a["touch"] for a in s["assignment"]) == list(range(9))
+        assert max(abs(a["residual_mm"]) for a in s["assignment"]) < 1e-4
+
+
+def test_cube_two_labelled_touches_and_the_rest_unlabelled_is_unique():
+    _, features, truth, touches = _case("cube", {"top": 3, "front": 3, "left": 3}, 3)
+    labelled = {"top": touches["top"][:1], "front": touches["front"][:1]}
+    rest = np.concatenate([touches["top"][1:], touches["front"][1:], touches["left"]])
+    result = register_touches(features, labelled, unlabelled=rest, sigma_mm=SIGMA_MM)
+    assert result["status"] == "unique" and result["search"] == "complete"
+    assert _within(result["pose"], truth)
+    # Touches are numbered labelled first: the unlabelled are 2..8, on the faces they were made on.
+    assert [a["feature"] for a in result["assignment"]] == ["top"] * 2 + ["front"] * 2 + ["left"] * 3
+    assert [a["touch"] for a in result["assignment"]] == list(range(2, 9))
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_v_block_unlabelled_noisy_touches_are_unique_within_the_bound(seed):
+    _, features, truth, touches = _case("v-block", {"groove_a": 4, "groove_b": 4, "end": 4}, seed, SIGMA_MM)
+    result = register_touches(features, {}, unlabelled=np.concatenate(list(touches.values())), sigma_mm=SIGMA_MM)
+    assert result["status"] == "unique" and result["search"] == "complete"
+    dt, dr = pose_errors(np.array(result["pose"]), truth)
+    assert dt < 5 * np.sqrt(3) * result["sigma_translation_mm"] + 1e-3
+    assert [a["feature"] for a in result["assignment"]] == ["groove_a"] * 4 + ["groove_b"] * 4 + ["end"] * 4
+
+
+def test_a_nominal_pose_puts_each_touch_on_its_nearest_feature():
+    _, features, truth, touches = _case("v-block", {"groove_a": 4, "groove_b": 4, "end": 4}, 6, SIGMA_MM)
+    result = register_touches(features, {}, unlabelled=np.concatenate(list(touches.values())), sigma_mm=SIGMA_MM,
+                              initial_pose=truth)
+    assert result["status"] == "unique" and result["search"] == "nominal"
+    assert _within(result["pose"], truth, 0.05, 0.05)
+    assert [a["feature"] for a in result["assignment"]] == ["groove_a"] * 4 + ["groove_b"] * 4 + ["end"] * 4
+
+
+def test_touch_files_say_unlabelled_with_an_empty_feature_or_null():
+    touches, _, lines = read_touch_csv("feature,x,y,z\ntop,1,2,3\n,4,5,6\n,7,8,9\n", {"top": None})
+    assert touches["top"].tolist() == [[1, 2, 3]] and touches[None].tolist() == [[4, 5, 6], [7, 8, 9]]
+    assert lines[None] == [3, 4]
+    document = build.features_document(templates.make("cube"))
+    features = features_from_json(document)
+    text = json.dumps({"touches": [{"feature": None, "points": [[1, 2, 3], [4, 5, 6]]},
+                                   {"feature": "top", "points": [[0, 0, 1]]}]})
+    touches, contacts, _, _, rows = read_touch_json(text, features)
+    assert touches[None].shape == (2, 3) and rows == ["touch 2", "touch 1", "touch 1"]
+    bad = json.dumps({"touches": [{"feature": None, "contact": "P/F-PL/M", "points": [[1, 2, 3]]}]})
+    with pytest.raises(ValueError, match="unlabelled touch"):
+        read_touch_json(bad, features)
+
+
+def test_register_py_takes_unlabelled_touches_from_a_csv(tmp_path):
+    document, _, truth, touches = _case("v-block", {"groove_a": 4, "groove_b": 4, "end": 4}, 7)
+    script = write_register_script(document, tmp_path / "register.py")
+    labelled = tmp_path / "labelled.csv"
+    labelled.write_text("feature,x,y,z\n" + "".join(f"{fid},{p[0]:.9f},{p[1]:.9f},{p[2]:.9f}\n"
+                                                    for fid, points in touches.items() for p in points))
+    out = subprocess.run([sys.executable, str(script), str(labelled), "--unlabelled", "--json"], capture_output=True,
+                         text=True)
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout)
+    assert _within(result["pose"], truth)
+    assert [a["feature"] for a in result["assignment"]] == ["groove_a"] * 4 + ["groove_b"] * 4 + ["end"] * 4
