@@ -96,6 +96,7 @@ def simulate(
     fixture_tolerance: Annotated[float | None, typer.Option(help="Print the fixture within a profile tolerance zone this wide, mm (default: as recorded in features.json; 0: an exact part).")] = None,
     out: Annotated[Path | None, typer.Option(help=f"Folder for {SUMMARY_NAME} and {PLOT_NAME} [default: the fixture folder].")] = None,
     force: Annotated[bool, typer.Option(help=f"Replace {SUMMARY_NAME} and {PLOT_NAME} written earlier.")] = False,
+    unlabelled: Annotated[bool, typer.Option(help="Register the point touches without their labels (the bound is that of the same touches labelled).")] = False,
 ):
     """Register synthetic noisy touches sampled on the STL; compare the errors with the Cramer-Rao bound.
 
@@ -140,9 +141,9 @@ def simulate(
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
         for _ in bar:
-            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance))
+            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance, unlabelled))
     summary = summarise(records, noise)
-    summary.update({"trials": trials, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
+    summary.update({"trials": trials, "unlabelled": unlabelled, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,
                     "calibrated": tolerance is not None and "calibration" in document})
     with staged_file(folder / SUMMARY_NAME) as path:
@@ -178,22 +179,22 @@ def _progress_stream():
     return sys.stderr if sys.stderr.isatty() else io.StringIO()
 
 
-def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone):
+def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled=False):
     """One registration of fresh synthetic touches: errors, status and the Cramer-Rao bound.
 
     On a printed part (``sampler.tolerance``), also the errors of a perfect
     part with the same noise and of the printed part without noise.
     """
-    record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed=True)
+    record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, True, unlabelled)
     if sampler.tolerance is not None:
-        alone = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed=False)
-        part = _registration(routine, sampler, rng, 0.0, sigma, nominal, lever, zone, printed=True)
+        alone = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, False, unlabelled)
+        part = _registration(routine, sampler, rng, 0.0, sigma, nominal, lever, zone, True, unlabelled)
         record.update({f"noise_only_{key}": alone[key] for key in ("translation_error_mm", "rotation_error_deg")})
         record.update({f"fixture_only_{key}": part[key] for key in ("translation_error_mm", "rotation_error_deg")})
     return record
 
 
-def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed):
+def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed, unlabelled):
     import time
 
     import numpy as np
@@ -215,7 +216,9 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
         twist = np.concatenate([np.radians(1.0) * _unit(rng), 1.0 * _unit(rng)])
         initial = fixture2meas_from_rt(*apply_twist(truth[:3, :3], truth[:3, 3], twist))
     start = time.perf_counter()
-    result = routine.register(touches, initial_pose=initial, sigma_mm=sigma, ball_radius_mm=sampler.ball_radius_mm,
+    # Unlabelled: the point touches without their features (the routine's numbering: after the contacts).
+    given = {"touches": {}, "unlabelled": np.concatenate(list(touches.values()))} if unlabelled else {"touches": touches}
+    result = routine.register(**given, initial_pose=initial, sigma_mm=sigma, ball_radius_mm=sampler.ball_radius_mm,
                               contacts=contacts, lever_mm=lever, fixture_tolerance_mm=zone)
     elapsed = time.perf_counter() - start
     # An inconsistent result with no explanation gives no pose: no error to count.

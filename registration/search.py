@@ -133,10 +133,9 @@ class Tree:
         # the touches' centroid on the touched patches' centre.
         middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
         middle = np.where(np.isfinite(middle), middle, 0.0)
+        # (Its bounds hold either way: :mod:`.unlabelled` uses them where the rows leave motions free.)
         self.fixes_pose = any(matrix_rank(self.problem.evaluate(R, self.centroid - R @ middle)[1],
                                           self.problem.scale()) == 6 for R in rotation_from_vector(RANK_ROTATIONS))
-        if not self.fixes_pose:
-            return
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
         self.modes(groups, problem.tolerance, threshold / problem.sigma**2)

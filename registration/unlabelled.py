@@ -40,13 +40,16 @@ from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
-from .search import LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Tree, beyond_pi, deviation_bound, first_cells, split
+from .search import LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Cells, Tree, beyond_pi, deviation_bound, first_cells, split
 from .solve import Solutions, solve, threshold_mm2, told_apart
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, same_pose
 
 SURFACES = ("plane", "sphere", "cylinder")  # what an unlabelled touch may lie on
 MAX_ASSIGNMENTS = 4  # a cell whose candidates leave at most this many assignments is searched under each
+MIN_JOINT = 6  # touches with one candidate bounded together (:meth:`Labels.kept`), or searched alone, when at
+# least this many
+LABEL_TURN_MM = 10.0  # a cell whose turn moves a touch at most this much is branched on a touch's feature
 CHUNK = 8192  # cells evaluated at once (memory: cells x candidate pairs x 3)
 RELAX = 100.0  # when no pose passes under any assignment, the threshold is raised by this factor ...
 RELAX_ROUNDS = 4  # ... at most this many times, to find the assignments the least-cost poses take
@@ -144,8 +147,7 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
         return trees[assignment]
 
     labels = Labels(groups, surfaces, points, ball_radius_mm, tolerance, threshold / sigma_mm**2)
-    fixes = lambda key: tree_of(key)[1].fixes_pose  # noqa: E731
-    handed, reason, kept, left = labels.search(threshold, fixes)
+    handed, reason, kept, left = labels.search(threshold, lambda key: tree_of(key)[1])
     out = Solutions()
     out.cells, out.search, out.reason = kept, "incomplete" if reason else "complete", reason
     found = []
@@ -176,7 +178,7 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
         relaxed = threshold
         for _ in range(RELAX_ROUNDS):
             relaxed *= RELAX
-            handed, _, _, left = labels.search(relaxed, fixes, FALLBACK_ASSIGNMENTS)
+            handed, _, _, left = labels.search(relaxed, lambda key: tree_of(key)[1], FALLBACK_ASSIGNMENTS, joint=False)
             for key in handed:
                 if None not in key:
                     found += _solved(tree_of(key)[0], key, out)
@@ -248,6 +250,7 @@ class Labels:
         self.rho = np.linalg.norm(self.b, axis=1)
         self.touch, self.feature, self.surfaces = np.array(touch), feature, surfaces
         self.unlabelled = self.touch >= count
+        self.count = len(points)  # unlabelled touches
         self.starts = np.flatnonzero(np.r_[True, np.diff(self.touch) != 0])
         cores = [f.core() for f in feature]
         self.core = np.array([c[0] for c in cores])
@@ -258,63 +261,114 @@ class Labels:
         self.dev = np.array([devs[f.id] for f in feature])
         self.box = np.array([patch_box(f) for f in feature])  # (J, 2, 3)
 
-    def search(self, threshold, fixes, best=None):
+    def search(self, threshold, tree_of, best=None, joint=True):
         """The cells handed to the labelled search, by key, as (v, w, ylo, yhi); the reason when the search
         stopped (else ""); the cells kept per level; when it stopped, the least-bound cells left. A key is a feature id per unlabelled touch, or None
         where the touch's feature is left open. A cell is handed on under every assignment of its
-        candidates when they are at most ``MAX_ASSIGNMENTS`` and each ``fixes`` a pose; else under the
+        candidates when they are at most ``MAX_ASSIGNMENTS`` and each fixes a pose (``tree_of(key)``: the
+        labelled search of a key, its trees' threshold this one when ``joint``, which bounds the touches with one
+        candidate together: :meth:`kept`); else under the
         touches with one candidate, when those fix a pose alone (the others' features are found on the
         leaves: :meth:`resolve`); else it is split. ``best``: only the keys of this many of the least-bound
         cells (the fallback's)."""
         v, w, ylo, yhi = first_cells()
+        allowed = None
+        F = len(self.surfaces)
         done, kept = [], []
         for _ in range(MAX_LEVELS):
-            v, w, ylo, yhi, bound, candidate = self.kept(threshold, v, w, ylo, yhi)
+            v, w, ylo, yhi, bound, candidate, allowed = self.kept(threshold, v, w, ylo, yhi, allowed,
+                                                                   tree_of if joint else None)
             kept.append(len(v))
-            choices = candidate[:, self.unlabelled].reshape(len(v), -1, len(self.surfaces)) if len(v) else \
-                np.zeros((0, self.unlabelled.sum() // len(self.surfaces), len(self.surfaces)), bool)
+            choices = candidate[:, self.unlabelled].reshape(len(v), self.count, F)
             count = choices.sum(axis=2)
-            keys = np.where(count == 1, np.argmax(choices, axis=2), -1)
+            keys = self.keys(candidate)
             whole = np.prod(count.astype(float), axis=1) <= MAX_ASSIGNMENTS
             rows, inverse = np.unique(candidate[whole][:, self.unlabelled], axis=0, return_inverse=True)
-            fixing = np.array([all(map(fixes, self.assignments(row))) for row in rows], bool)
+            fixing = np.array([all(tree_of(a).fixes_pose for a in self.assignments(row)) for row in rows], bool)
             whole[whole] = fixing[inverse.ravel()]
             rows, inverse = np.unique(keys, axis=0, return_inverse=True)
-            alone = np.array([fixes(self.key(row)) for row in rows], bool)[inverse.ravel()] & ~whole
-            done.append((v[whole | alone], w[whole | alone], ylo[whole | alone], yhi[whole | alone],
-                         bound[whole | alone], np.where(alone[:, None, None], keys[:, :, None] == np.arange(
-                             len(self.surfaces)), choices)[whole | alone].reshape(-1, self.unlabelled.sum()),
-                         alone[whole | alone]))
-            rest = ~(whole | alone)
-            v, w, ylo, yhi = v[rest], w[rest], ylo[rest], yhi[rest]
+            # (Each surface touch gives one row: fewer than six touches fix no pose.)
+            alone = np.array([self.labelled + np.sum(row >= 0) >= MIN_JOINT and tree_of(self.key(row)).fixes_pose
+                              for row in rows], bool)[inverse.ravel()] & ~whole
+            out = whole | alone
+            done.append((v[out], w[out], ylo[out], yhi[out], bound[out],
+                         np.where(alone[:, None, None], keys[:, :, None] == np.arange(F), choices)[out]
+                         .reshape(-1, self.unlabelled.sum()), alone[out]))
+            rest = ~out
+            v, w, ylo, yhi, allowed, count, choices = (x[rest] for x in (v, w, ylo, yhi, allowed, count, choices))
             if not len(v):
                 return self.handed(done, best), "", kept, None
-            turning = np.sqrt(3.0) * w * self.rho.max() >= np.linalg.norm(0.5 * (yhi - ylo), axis=1)
-            if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS:
+            # A cell whose turn is small but whose touches' features are still open: branched on the open touch
+            # with the fewest candidates, one cell per candidate (the labelled search takes over once the
+            # touches with one feature fix a pose); the others split as the labelled search splits.
+            branching = (np.sqrt(3.0) * w * self.rho.max() <= LABEL_TURN_MM) & (count.max(axis=1) > 1)
+            touch = np.argmin(np.where(count > 1, count, np.iinfo(int).max), axis=1)
+            cell, feature = np.nonzero(choices[np.arange(len(v)), touch] & branching[:, None])
+            branch = allowed[cell].copy()
+            pairs = self.labelled + F * touch[cell][:, None] + np.arange(F)  # the branched touch's pairs
+            branch[np.arange(len(cell))[:, None], pairs] = np.arange(F) == feature[:, None]
+            plain = ~branching
+            turning = np.sqrt(3.0) * w[plain] * self.rho.max() >= np.linalg.norm(0.5 * (yhi - ylo)[plain], axis=1)
+            if len(cell) + 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS:
+                rest_bound = bound[rest]
                 break
-            v, w, ylo, yhi = split(v, w, ylo, yhi, turning, np.ones(3, bool))
+            parts = split(v[plain], w[plain], ylo[plain], yhi[plain], turning, np.ones(3, bool))
+            allowed = np.concatenate([branch, np.repeat(allowed[plain][turning], 8, axis=0),
+                                      np.repeat(allowed[plain][~turning], 2, axis=0)])
+            v, w, ylo, yhi = (np.concatenate([x[cell], p]) for x, p in zip((v, w, ylo, yhi), parts))
+        else:
+            rest_bound = bound[rest]
         # Stopped: the least-bound cells left, for the local fallback.
-        order = np.argsort(bound[rest])[:FALLBACK_STARTS]
+        order = np.argsort(rest_bound)[:FALLBACK_STARTS]
         return {}, f"the touches' features were not told within {MAX_CELLS} cells a level", kept, \
             (v[order], w[order], ylo[order], yhi[order])
 
-    def kept(self, threshold, v, w, ylo, yhi):
-        """The cells whose bound is at most the threshold: (v, w, ylo, yhi, bound, candidate)."""
+    def kept(self, threshold, v, w, ylo, yhi, allowed=None, tree_of=None):
+        """The cells whose bound is at most the threshold: (v, w, ylo, yhi, bound, candidate, allowed);
+        ``allowed`` (K, J): the pairs a cell's branch leaves (all by default). With ``tree_of`` (a key's
+        labelled search, :class:`.search.Tree`), the touches with one candidate are bounded together by its
+        zeroth-order bound (their share of the cost), the others each by its own."""
+        allowed = np.ones((len(v), len(self.touch)), bool) if allowed is None else allowed
         if not len(v):
-            return v, w, ylo, yhi, np.zeros(0), np.zeros((0, len(self.touch)), bool)
+            return v, w, ylo, yhi, np.zeros(0), allowed, allowed
         root = float(np.sqrt(threshold))
         grow = EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + root + self.dev + self.offset
         low, high = self.box[:, 0] - grow[:, None], self.box[:, 1] + grow[:, None]
-        parts = [self.bound(v[k:k + CHUNK], w[k:k + CHUNK], ylo[k:k + CHUNK], yhi[k:k + CHUNK], root, low, high)
-                 for k in range(0, len(v), CHUNK)]
-        bound, candidate, ylo, yhi = (np.concatenate(p) for p in zip(*parts))
+        parts = [self.bound(v[k:k + CHUNK], w[k:k + CHUNK], ylo[k:k + CHUNK], yhi[k:k + CHUNK], root, low, high,
+                            allowed[k:k + CHUNK]) for k in range(0, len(v), CHUNK)]
+        shares, candidate, ylo, yhi = (np.concatenate(p) for p in zip(*parts))
+        bound = shares.sum(axis=1)
         keep = (bound <= threshold) & ~beyond_pi(v, w) & np.all(ylo <= yhi, axis=1)
-        return v[keep], w[keep], ylo[keep], yhi[keep], bound[keep], candidate[keep]
+        v, w, ylo, yhi, bound, candidate, allowed, shares = (x[keep] for x in (v, w, ylo, yhi, bound, candidate,
+                                                                              allowed, shares))
+        if tree_of is not None and len(v):
+            count = candidate[:, self.unlabelled].reshape(len(v), self.count, len(self.surfaces)).sum(axis=2)
+            keys = self.keys(candidate)
+            rows, inverse = np.unique(keys, axis=0, return_inverse=True)
+            inverse = inverse.ravel()
+            for r, row in enumerate(rows):
+                if self.labelled + np.sum(row >= 0) < MIN_JOINT:
+                    continue
+                m = np.flatnonzero(inverse == r)
+                tree = tree_of(self.key(row))
+                c = tree.zeroth_bound(Cells(v[m], w[m], *Tree.turned(ylo[m], yhi[m], tree.Q)))
+                open_share = np.sum(np.where(count[m] != 1, shares[m, self.labelled:], 0.0), axis=1)
+                bound[m] = np.maximum(bound[m], c.zeroth + open_share)
+                lo, hi = Tree.turned(c.ylo, c.yhi, tree.Q.T)
+                ylo[m], yhi[m] = np.maximum(ylo[m], lo), np.minimum(yhi[m], hi)
+            keep = (bound <= threshold) & np.all(ylo <= yhi, axis=1)
+            v, w, ylo, yhi, bound, candidate, allowed = (x[keep] for x in (v, w, ylo, yhi, bound, candidate, allowed))
+        return v, w, ylo, yhi, bound, candidate, allowed
+
+    def keys(self, candidate):
+        """Each cell's unlabelled touches' one candidate (an index into the surfaces, -1: none or several)."""
+        choices = candidate[:, self.unlabelled].reshape(len(candidate), self.count, len(self.surfaces))
+        return np.where(choices.sum(axis=2) == 1, np.argmax(choices, axis=2), -1)
 
     def resolve(self, threshold, v, w, ylo, yhi):
         """Leaves of a search under some touches' features (y boxes on the fixture frame's axes), by every
         assignment of all the touches that their candidates leave (:meth:`search`'s keys)."""
-        v, w, ylo, yhi, bound, candidate = self.kept(threshold, v, w, ylo, yhi)
+        v, w, ylo, yhi, bound, candidate, _ = self.kept(threshold, v, w, ylo, yhi)
         choices = candidate[:, self.unlabelled]
         return self.handed([(v, w, ylo, yhi, bound, choices, np.zeros(len(v), bool))], None)
 
@@ -347,9 +401,10 @@ class Labels:
                 out.setdefault(key, []).append(members)
         return {key: tuple(x[np.concatenate(m)] for x in (v, w, ylo, yhi)) for key, m in out.items()}
 
-    def bound(self, v, w, ylo, yhi, root, low, high):
-        """Each cell's lower bound of the cost under any assignment (K,), which features are candidates of
-        which touch (K, J), and its y box shrunk to the candidates' boxes."""
+    def bound(self, v, w, ylo, yhi, root, low, high, allowed):
+        """Each cell's lower bound of each touch's share of the cost under any assignment its branch
+        ``allowed`` (K, J) leaves (K, n), which features are candidates of which touch (K, J), and its y box
+        shrunk to the candidates' boxes."""
         turn = (np.sqrt(3.0) * w)[:, None] * self.rho[None]  # (K, n)
         a = (self.b @ rotation_from_vector(v))[:, self.touch]  # (K, J, 3): R0^T b_i
         reach = turn[:, self.touch, None]
@@ -360,9 +415,9 @@ class Labels:
         centre = a + np.where(finite[..., None], 0.5 * (lo + hi), 0.0)
         half = np.where(finite[..., None], 0.5 * (hi - lo), 0.0)
         least = np.where(finite, self.least(centre, half), 0.0) - turn[:, self.touch]
-        candidate = open_box & (least <= root + self.dev)
+        candidate = open_box & (least <= root + self.dev) & allowed
         share = np.where(candidate, np.maximum(least - self.dev, 0.0) ** 2, np.inf)
-        bound = np.minimum.reduceat(share, self.starts, axis=1).sum(axis=1)
+        bound = np.minimum.reduceat(share, self.starts, axis=1)  # each touch's least share of the cost
         # y lies in each touch's union of its candidates' boxes.
         new_lo = np.minimum.reduceat(np.where(candidate[..., None], lo, np.inf), self.starts, axis=1).max(axis=1)
         new_hi = np.maximum.reduceat(np.where(candidate[..., None], hi, -np.inf), self.starts, axis=1).min(axis=1)
