@@ -54,8 +54,7 @@ CHUNK = 8192  # cells evaluated at once (memory: cells x candidate pairs x 3)
 RELAX = 100.0  # when no pose passes under any assignment, the threshold is raised by this factor ...
 RELAX_ROUNDS = 4  # ... at most this many times, to find the assignments the least-cost poses take
 FALLBACK_ASSIGNMENTS = 3  # ... and the best this many of them are refined
-FALLBACK_STARTS = 24  # a search that stops: poses refined from this many of its least-bound cells ...
-LOCAL_ROUNDS = 2  # ... each touch put on its nearest feature this many times
+LOCAL_ROUNDS = 2  # a search that stops: each touch put on its nearest feature this many times from each start
 
 
 def assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma, lever, tolerance):
@@ -147,7 +146,7 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
         return trees[assignment]
 
     labels = Labels(groups, surfaces, points, ball_radius_mm, tolerance, threshold / sigma_mm**2)
-    handed, reason, kept, left = labels.search(threshold, lambda key: tree_of(key)[1])
+    handed, reason, kept = labels.search(threshold, lambda key: tree_of(key)[1])
     out = Solutions()
     out.cells, out.search, out.reason = kept, "incomplete" if reason else "complete", reason
     found = []
@@ -172,25 +171,29 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
     for assignment, region in regions.items():
         if region.poses or not region.complete:
             found += _solved(tree_of(assignment)[0], assignment, out, region)
-    if not found and left is None:
+    stopped = bool(reason)
+    if not found and not stopped:
         # No pose passes under any assignment: the assignments of the least-cost poses, for what the verdict
         # says of them (inconsistent, and which touches fit no feature).
         relaxed = threshold
         for _ in range(RELAX_ROUNDS):
             relaxed *= RELAX
-            handed, _, _, left = labels.search(relaxed, lambda key: tree_of(key)[1], FALLBACK_ASSIGNMENTS, joint=False)
+            handed, why, _ = labels.search(relaxed, lambda key: tree_of(key)[1], FALLBACK_ASSIGNMENTS, joint=False)
+            stopped = bool(why)
             for key in handed:
                 if None not in key:
                     found += _solved(tree_of(key)[0], key, out)
-            if found or left is not None:
+            if found or stopped:
                 break
-    if not found and left is not None:
-        # The first search stopped: poses refined from its least-bound cells, each touch on its nearest feature.
-        v, w, ylo, yhi = left
-        R = rotation_from_vector(v)
-        y = np.where(np.isfinite(ylo + yhi), 0.5 * (ylo + yhi), 0.0)
+    if not found and stopped:
+        # The first search stopped: poses refined from every first-level rotation (the touches' centroid on the
+        # surfaces' middle), each touch on its nearest feature.
+        R = rotation_from_vector(first_cells()[0])
+        boxes = np.array([patch_box(f) for f in surfaces])
+        middle = np.mean(np.where(np.isfinite(boxes), boxes, 0.0).mean(axis=1), axis=0)
         centroid = labels.centroid
-        for Rk, yk in zip(R, y):
+        for Rk in R:
+            yk = middle
             pose = np.eye(4)
             pose[:3, :3], pose[:3, 3] = Rk, centroid - Rk @ yk
             for _ in range(LOCAL_ROUNDS):
@@ -263,14 +266,13 @@ class Labels:
 
     def search(self, threshold, tree_of, best=None, joint=True):
         """The cells handed to the labelled search, by key, as (v, w, ylo, yhi); the reason when the search
-        stopped (else ""); the cells kept per level; when it stopped, the least-bound cells left. A key is a feature id per unlabelled touch, or None
-        where the touch's feature is left open. A cell is handed on under every assignment of its
-        candidates when they are at most ``MAX_ASSIGNMENTS`` and each fixes a pose (``tree_of(key)``: the
-        labelled search of a key, its trees' threshold this one when ``joint``, which bounds the touches with one
-        candidate together: :meth:`kept`); else under the
-        touches with one candidate, when those fix a pose alone (the others' features are found on the
-        leaves: :meth:`resolve`); else it is split. ``best``: only the keys of this many of the least-bound
-        cells (the fallback's)."""
+        stopped (else ""); the cells kept per level. A key is a feature id per unlabelled touch, or None where
+        the touch's feature is left open; ``tree_of(key)`` is its labelled search (:class:`.search.Tree`, at
+        this threshold when ``joint``: it then bounds the touches with one candidate together, :meth:`kept`).
+        A cell is handed on under every assignment of its candidates when they are at most
+        ``MAX_ASSIGNMENTS`` and each fixes a pose; else under the touches with one candidate, when those fix a
+        pose alone (the others' features are found on the leaves: :meth:`resolve`); else it is branched or
+        split. ``best``: only the keys of this many of the least-bound cells (the fallback's)."""
         v, w, ylo, yhi = first_cells()
         allowed = None
         F = len(self.surfaces)
@@ -297,7 +299,7 @@ class Labels:
             rest = ~out
             v, w, ylo, yhi, allowed, count, choices = (x[rest] for x in (v, w, ylo, yhi, allowed, count, choices))
             if not len(v):
-                return self.handed(done, best), "", kept, None
+                return self.handed(done, best), "", kept
             # A cell whose turn is small but whose touches' features are still open: branched on the open touch
             # with the fewest candidates, one cell per candidate (the labelled search takes over once the
             # touches with one feature fix a pose); the others split as the labelled search splits.
@@ -310,18 +312,12 @@ class Labels:
             plain = ~branching
             turning = np.sqrt(3.0) * w[plain] * self.rho.max() >= np.linalg.norm(0.5 * (yhi - ylo)[plain], axis=1)
             if len(cell) + 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS:
-                rest_bound = bound[rest]
-                break
+                return {}, f"the touches' features were not told within {MAX_CELLS} cells a level", kept
             parts = split(v[plain], w[plain], ylo[plain], yhi[plain], turning, np.ones(3, bool))
             allowed = np.concatenate([branch, np.repeat(allowed[plain][turning], 8, axis=0),
                                       np.repeat(allowed[plain][~turning], 2, axis=0)])
             v, w, ylo, yhi = (np.concatenate([x[cell], p]) for x, p in zip((v, w, ylo, yhi), parts))
-        else:
-            rest_bound = bound[rest]
-        # Stopped: the least-bound cells left, for the local fallback.
-        order = np.argsort(rest_bound)[:FALLBACK_STARTS]
-        return {}, f"the touches' features were not told within {MAX_CELLS} cells a level", kept, \
-            (v[order], w[order], ylo[order], yhi[order])
+        return {}, f"the touches' features were not told after {MAX_LEVELS} levels", kept
 
     def kept(self, threshold, v, w, ylo, yhi, allowed=None, tree_of=None):
         """The cells whose bound is at most the threshold: (v, w, ylo, yhi, bound, candidate, allowed);
