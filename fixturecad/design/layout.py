@@ -566,7 +566,7 @@ def _nudged(piece: Piece, size, rng, scale) -> Piece:
 def _better(layout, contacts, labels, ball_mm, rng, pieces, turns, moved):
     """The layout of these pieces and sensor turns when the piece ``moved`` still prints, the pieces fit and
     are reached, the default plan carries more information than ``layout``'s and the minimal plan locates;
-    else None. The information first: most nudges fail there, and it is the dearer test's half."""
+    else None. The information is tested first: most nudges fail there, and the mobility costs as much."""
     if not (all(math.degrees(math.asin(min(1.0, piece.w[2]))) >= MIN_ELEVATION_DEG
                 and (piece.element != "S" or piece.radius <= MAX_STALK_OF_BALL * piece.head_radius)
                 and _as_drawn(piece, labels.count(piece.id), layout.size)
