@@ -20,11 +20,17 @@ the bound, ``inconsistent`` counted when the true pose passes the residual
 test). Run from the repository root:
 
     .venv/bin/python benchmarks/bench_design.py [--sample 12] [--seed 1]
-    .venv/bin/python benchmarks/bench_design.py --all [--random 1000] [--seed 1]
+    .venv/bin/python benchmarks/bench_design.py --all [--random 1000] [--seed 1] [--processes N]
+    .venv/bin/python benchmarks/bench_design.py --classes "{T1}{S-R}" "{S}{S}{S-S}" [--random 1000]
+    .venv/bin/python benchmarks/bench_design.py --classes @classes.txt  # one class a line
+
+``--classes`` takes the listed classes end to end as ``--all`` does, each
+with the random draws it gets in ``--all`` (seeded by its place in Table V).
 """
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -155,22 +161,29 @@ def guarded(task) -> dict:
 
 def all_classes(args) -> None:
     from concurrent.futures import ProcessPoolExecutor
-    import os
 
     from fixturecad.theory.enumeration import enumerate_classes
 
-    found = enumerate_classes().found[:args.limit]
-    tasks = [(i, item.name, item.members, args.random, args.seed) for i, item in enumerate(found)]
+    found = enumerate_classes().found
+    known = {item.name for item in found}
+    unknown = [name for name in args.classes or () if name not in known]
+    if unknown:
+        raise SystemExit(f"not classes of Table V: {' '.join(unknown)}")
+    chosen = list(enumerate(found))[:args.limit] if args.classes is None else [
+        (i, item) for i, item in enumerate(found) if item.name in args.classes]
+    tasks = [(i, item.name, item.members, args.random, args.seed) for i, item in chosen]
     um = lambda b: "-" if b is None or b[0] is None else f"{b[0] * 1e3:7.1f} um {b[1] * 1e3:7.1f} mdeg"  # noqa: E731
-    print("class | design: default-plan bound at 5 um | best random | D design - D random | noise-free | 5 um")
+    print("class | design: default-plan bound at 5 um | best random | D design - D random | solid, files | "
+          "noise-free | 5 um")
     start = time.perf_counter()
     results = []
-    with ProcessPoolExecutor(os.cpu_count()) as pool:
+    with ProcessPoolExecutor(args.processes) as pool:
         for r in pool.map(guarded, tasks, chunksize=1):
             results.append(r)
             gain = "-" if r["random_information"] is None else f"{r['information'] - r['random_information']:+.2f}"
-            print(f"{r['class']} | {um(r['bound'])} | {um(r['random_bound'])} | {gain} | {r['exact_status']} | "
-                  f"{r['noisy_status']} {r.get('error_over_bound', float('nan')):.2f} x bound"
+            checks = ", ".join("ok" if r.get(key) else "FAILED" for key in ("solid", "files"))
+            print(f"{r['class']} | {um(r['bound'])} | {um(r['random_bound'])} | {gain} | {checks} | "
+                  f"{r['exact_status']} | {r['noisy_status']} {r.get('error_over_bound', float('nan')):.2f} x bound"
                   + (f" | error: {r['cad_error']}" if "cad_error" in r else ""), flush=True)
     wall = time.perf_counter() - start
     n = len(results)
@@ -190,21 +203,23 @@ def all_classes(args) -> None:
     print(f"5 um noise: within {WITHIN_BOUND:g} x the bound {within}/{n}; "
           + ", ".join(f"{k} {v}" for k, v in sorted(Counter(r["noisy_status"] for r in results).items()))
           + f"; inconsistent while the true pose passes the residual test: {inconsistent}")
-    print(f"time: {wall:.0f} s wall on {os.cpu_count()} processes; per class median design "
+    print(f"time: {wall:.0f} s wall on {args.processes} processes; per class median design "
           f"{statistics.median(r['design_s'] for r in results):.2f} s, build "
           f"{statistics.median(r['build_s'] for r in results):.2f} s, two registrations "
           f"{statistics.median(r['register_s'] for r in results):.2f} s (max {max(r['register_s'] for r in results):.1f} s)")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], fromfile_prefix_chars="@")
     parser.add_argument("--sample", type=int, default=12, help="classes built end to end, spread over Table V")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--all", action="store_true", help="every class end to end in a process pool")
     parser.add_argument("--random", type=int, default=1000, help="random layouts each design is compared with")
     parser.add_argument("--limit", type=int, default=None, help="with --all: the first N classes only")
+    parser.add_argument("--classes", nargs="+", metavar="CLASS", help="these classes end to end, as with --all")
+    parser.add_argument("--processes", type=int, default=os.cpu_count(), help="the pool's processes")
     args = parser.parse_args()
-    if args.all:
+    if args.all or args.classes:
         return all_classes(args)
     from fixturecad.design.combination import for_class
     from fixturecad.design import DEFAULT_BALL_MM, DEFAULT_SIZE_MM, DESIGN_SEED

@@ -27,6 +27,7 @@ criterion of ``fixturecad plan``) is kept and then refined by nudging one
 piece at a time (:func:`refined`).
 """
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -56,14 +57,20 @@ GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # steps of a sequence that fills an inter
 MAX_GROWTH = 2.5  # pieces' radii are drawn up to this many times the sizes above
 MAX_LENGTH_GROWTH = 5.0  # and their lengths up to this many times
 FOOT_RING = 0.28  # feet on a circle of this radius, of the size
+BOSS_SENSOR_TILT_DEG = 35.0  # a sensor laid round a boss turns at most this far off across it
 ROOF_HALF_ANGLE_DEG = 45.0  # a chisel's roof faces leave its ridge this far from the stalk direction
 CONE_HEIGHT = 1.0  # a cone tip's height, of its stalk radius
 MIN_SIZE_MM = 20.0
+DEGENERATE_MM2 = 1e-12  # a segment whose squared length is below this is a point (a ball's capsule)
 LAYOUTS_COMPARED = 64  # locating layouts a design chooses the best of
 LAYOUT_TRIALS = 400  # random layouts tried at most
-REFINE_STEPS = 150  # nudges tried on the best random layout
-NUDGE = 0.03  # a nudge's standard deviation: of the size for feet, relative for radii and lengths
-NUDGE_RAD = 0.08  # and for directions and phases
+REFINE_STEPS = 120  # nudges tried on each layout refined
+REFINED_STARTS = 3  # the best random layouts refined: one alone often sits in a poorer basin
+NUDGE = 0.03  # a nudge's standard deviation: of the size for feet
+NUDGE_RAD = 0.08  # and for directions, phases and sensor turns
+NUDGE_GROWTH_LOG = 0.3  # and of the logarithm of radii and lengths: pieces grow or shrink boldly, as in the pool
+NUDGE_GROWTH = 1.5  # a nudge kept grows the next ones this many times; one not kept shrinks them by its 4th root
+MIN_NUDGE_SCALE, MAX_NUDGE_SCALE = 0.1, 4.0  # the nudges stay within these multiples of the sizes above
 MAX_STALK_OF_BALL = 0.8  # a ball's stalk is at most this fraction of its radius
 MIN_MARGIN = 1e-3  # smallest normalised singular value of the plan's Jacobian a design accepts
 FEATURE_NAMES = {"PL": "face", "S": "ball", "C": "boss", "L": "edge", "P": "tip"}
@@ -179,6 +186,7 @@ class Layout:
     touches: list  # touch-plan entries (templates.base.touch form): one per contact
     checks: list  # a second touch of each contact elsewhere on its feature: what makes the pose unique
     faces: dict = field(default_factory=dict)  # block face -> the id of the combination's plane on it
+    turns: dict = field(default_factory=dict)  # (feature id, touch index) -> its sensor's turn, rad (sensor_turn)
     margin: float = 0.0
     mobility: int = 6
     information: float = -math.inf  # log det of the default plan's scaled information (the D criterion)
@@ -193,17 +201,27 @@ class Layout:
 
     def block_features(self) -> list:
         """The block's top, front and left faces as planes, their whole rectangles the patches."""
-        s, t = self.size, self.thickness
-        low, high = np.array([-s / 2, -s / 2, -t]), np.array([s / 2, s / 2, 0.0])
-        return [Plane(fid, _face_point(face, s, t), BLOCK_NORMALS[face],
-                      Extent(halfspaces=box_halfspaces(low, high, BLOCK_FACES[face])))
-                for face, fid in self.face_ids().items()]
+        return list(_block_planes(self.size, tuple(self.face_ids().items())))
 
     def features(self) -> list:
         return [piece.feature() for piece in self.pieces] + self.block_features()
 
     def volume(self) -> float:
         return self.size**2 * self.thickness + sum(piece.volume() for piece in self.pieces)
+
+
+@functools.lru_cache(maxsize=16)
+def _block_planes(size, face_ids) -> tuple:
+    """:meth:`Layout.block_features` of a block of ``size`` whose faces carry ``face_ids`` ((face, id) pairs),
+    made once: the layout search asks for them at every step; read-only, as they are shared."""
+    t = BASE_THICKNESS * size
+    low, high = np.array([-size / 2, -size / 2, -t]), np.array([size / 2, size / 2, 0.0])
+    planes = tuple(Plane(fid, _face_point(face, size, t), BLOCK_NORMALS[face],
+                         Extent(halfspaces=box_halfspaces(low, high, BLOCK_FACES[face]))) for face, fid in face_ids)
+    for plane in planes:
+        for array in (plane.point, plane.normal, plane.extent.halfspaces):
+            array.flags.writeable = False
+    return planes
 
 
 def plan_problem(features, entries) -> Problem:
@@ -314,20 +332,33 @@ def face_spot(face, index, size, thickness) -> tuple[np.ndarray, np.ndarray]:
     return point, normal
 
 
-def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, rng) -> dict:
+def sensor_turn(ctype: ContactType, feature, rng) -> float | None:
+    """A random turn of a touch's sensor (rad) for :func:`sensor_entry`: about the normal when nothing fixes
+    its direction, off across a boss within ``BOSS_SENSOR_TILT_DEG``; None for a plain probe and across an
+    edge, which have none."""
+    if (ctype.sensor == "P" and not ctype.fixture_fixed) or feature.kind == "line":
+        return None
+    if feature.kind == "cylinder":
+        return math.radians(rng.uniform(-BOSS_SENSOR_TILT_DEG, BOSS_SENSOR_TILT_DEG))
+    return rng.uniform(0, 2 * math.pi)
+
+
+def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, turn: float | None) -> dict:
     """One touch-plan entry: a sensor element of ``ctype`` touching ``feature`` at ``point`` from the
     outward ``normal``'s side (:func:`~fixturecad.registration.touches.laid_sensor`); a line or a
-    cylinder sensor lies across an edge, round a boss, or anywhere in a face or on a ball."""
+    cylinder sensor lies across an edge, round a boss turned by ``turn`` (rad, :func:`sensor_turn`), or
+    in any direction ``turn`` gives in a face or on a ball."""
     entry = {"contact": ctype.name, "feature": feature.id, "points": [[float(v) for v in point]]}
     if ctype.sensor == "P" and not ctype.fixture_fixed:
         return entry  # a plain probe touch
     axis = feature.axis if feature.kind == "cylinder" else feature.direction if feature.kind == "line" else None
     if axis is None:
-        tangent = _rotate(perpendicular_basis(normal)[0], normal, rng.uniform(0, 2 * math.pi))
+        tangent = _rotate(perpendicular_basis(normal)[0], normal, turn)
     else:
         tangent = _unit(np.cross(axis, normal))  # across the edge, or round the boss
         if feature.kind == "cylinder":
-            tangent = _rotate(tangent, normal, math.radians(rng.uniform(-35.0, 35.0)))
+            tilt = math.radians(BOSS_SENSOR_TILT_DEG)
+            tangent = _rotate(tangent, normal, min(tilt, max(-tilt, turn)))
     sensor = laid_sensor(ctype.sensor, point, normal, tangent, ball_mm)
     if ctype.sensor == "PL" and ctype.sensor_fixed and axis is not None:
         sensor["line"] = axis  # where on the plane the line or the boss lies is known
@@ -336,19 +367,50 @@ def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, rng
     return entry
 
 
-def _segment_distance(a0, a1, b0, b1, samples=24) -> float:
-    """Smallest distance between two segments (sampled finely enough for a clearance test), mm."""
-    t = np.linspace(0.0, 1.0, samples)[:, None]
-    a = a0 + t * (a1 - a0)
-    b = b0 + t * (b1 - b0)
-    return float(np.min(np.linalg.norm(a[:, None] - b[None], axis=2)))
+def _segment_distance(a0, a1, b0, b1) -> float:
+    """Smallest distance between the segments a0-a1 and b0-b1, either of them possibly a point, mm: the
+    closest points' parameters, each clamped to its segment (Ericson, Real-Time Collision Detection, 5.1.9)."""
+    d1, d2, r = a1 - a0, b1 - b0, a0 - b0
+    a, e, f = float(d1 @ d1), float(d2 @ d2), float(d2 @ r)
+    if a <= DEGENERATE_MM2:
+        s, t = 0.0, (min(1.0, max(0.0, f / e)) if e > DEGENERATE_MM2 else 0.0)
+    else:
+        c = float(d1 @ r)
+        if e <= DEGENERATE_MM2:
+            s, t = min(1.0, max(0.0, -c / a)), 0.0
+        else:
+            b = float(d1 @ d2)
+            denominator = a * e - b * b  # 0 for parallel segments: any s will do, take 0
+            s = min(1.0, max(0.0, (b * f - c * e) / denominator)) if denominator > DEGENERATE_MM2 * a else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                s, t = min(1.0, max(0.0, -c / a)), 0.0
+            elif t > 1.0:
+                s, t = min(1.0, max(0.0, (b - c) / a)), 1.0
+    return float(np.linalg.norm(r + s * d1 - t * d2))
 
 
 def _capsules(piece: Piece) -> list:
-    """Segments with radii (start, end, radius mm) that hold the piece: its stalk, and a ball apart."""
+    """Segments with radii (start, end, radius mm) that hold the piece above the block: its stalk, from
+    where its rim leaves z = 0 (a leaning stalk's uphill side rises before its foot on the axis: two
+    stalks that met there made a solid short of the analytic volume), and a ball apart."""
     tip = CONE_HEIGHT * piece.radius if piece.element == "P" else 0.0
-    stalk = (piece.foot, piece.top + tip * piece.w, piece.radius)
+    stalk = (piece.foot - piece.radius * piece.tilt / piece.w[2] * piece.w, piece.top + tip * piece.w, piece.radius)
     return [stalk, (piece.top, piece.top, piece.head_radius)] if piece.element == "S" else [stalk]
+
+
+def _stalk_radius(element, touches, size) -> float:
+    """The smallest stalk radius :func:`_place` draws for a piece touched ``touches`` times, mm."""
+    return (SHARED_PLANE_RADIUS if element == "PL" and touches > 1 else STALK_RADIUS[element]) * size
+
+
+def _as_drawn(piece: Piece, touches, size) -> bool:
+    """Whether the piece's radii and length lie within the ranges :func:`_place` draws them from: the
+    refinement moves pieces about, but does not grow them past what the block was given."""
+    base = _stalk_radius(piece.element, touches, size)
+    ball = BALL_RADIUS * size if piece.element == "S" else 0.0
+    return (base <= piece.radius <= MAX_GROWTH * base and ball <= piece.head_radius <= MAX_GROWTH * ball
+            and 0.8 * HEAD_LENGTH * size <= piece.length <= (0.8 + MAX_LENGTH_GROWTH) * HEAD_LENGTH * size)
 
 
 def _place(groups, size, rng) -> list:
@@ -364,7 +426,7 @@ def _place(groups, size, rng) -> list:
         foot = np.array([ring * math.cos(angle), ring * math.sin(angle), 0.0])
         w = _direction(rng, angle if count > 1 else None)
         grow = rng.uniform(1.0, 1.0 + bold * (MAX_GROWTH - 1.0))  # larger pieces carry more information
-        radius = grow * (SHARED_PLANE_RADIUS if element == "PL" and touches > 1 else STALK_RADIUS[element]) * size
+        radius = grow * _stalk_radius(element, touches, size)
         head = grow * BALL_RADIUS * size if element == "S" else 0.0
         length = HEAD_LENGTH * size * rng.uniform(0.8, 0.8 + bold * MAX_LENGTH_GROWTH)
         if element == "S":
@@ -430,9 +492,10 @@ def layout_plan(contacts, labels, size, ball_mm, rng, block_faces=True):
     return None if pieces is None else planned(contacts, labels, size, ball_mm, pieces, faces, rng)
 
 
-def planned(contacts, labels, size, ball_mm, pieces, faces, rng):
-    """The layout of these pieces and block faces with its touch plan (its sensors laid by ``rng``), or
-    None when a touch is hidden."""
+def planned(contacts, labels, size, ball_mm, pieces, faces, rng, turns=None):
+    """The layout of these pieces and block faces with its touch plan, or None when a touch is hidden. Its
+    sensors are turned as ``turns`` ((feature id, touch index) -> rad) says, the rest by ``rng``
+    (:func:`sensor_turn`), and the layout keeps every turn."""
     order = list(dict.fromkeys(labels))
     on_faces = {fid: face for face, fid in faces.items()}
     layout = Layout(size, pieces, [], [], faces)
@@ -450,70 +513,94 @@ def planned(contacts, labels, size, ball_mm, pieces, faces, rng):
                 reachable = _reachable(point, normal, fid, pieces, size)
             if not reachable:
                 return None
-            plan.append(sensor_entry(ctype, features[fid], point, normal, ball_mm, rng))
+            key = (fid, index)
+            turn = turns[key] if turns is not None else sensor_turn(ctype, features[fid], rng)
+            layout.turns[key] = turn
+            plan.append(sensor_entry(ctype, features[fid], point, normal, ball_mm, turn))
         seen[fid] += 1
     return layout
 
 
 def best_layout(contacts, labels, size, ball_mm, seed, keep=LAYOUTS_COMPARED, trials=LAYOUT_TRIALS,
-                steps=REFINE_STEPS):
-    """The layout whose default plan carries the most information (:func:`plan_information`) among the
-    first ``keep`` locating ones of up to ``trials`` seeded random layouts, the planes on the block's
-    faces, or on stalks when no layout locates so, then :func:`refined` by ``steps`` nudges; None if none
-    locates; and the smallest mobility met (what remains when none locates)."""
+                steps=REFINE_STEPS, starts=REFINED_STARTS):
+    """The layout whose default plan carries the most information (:func:`plan_information`): the
+    ``starts`` best of the first ``keep`` locating ones of up to ``trials`` seeded random layouts (the
+    planes on the block's faces, or on stalks when no layout locates so), each :func:`refined` by
+    ``steps`` nudges; None if none locates; and the smallest mobility met (what remains when none
+    locates)."""
     lowest = 6
     for block_faces in (True, False):
         rng = np.random.default_rng(seed)
-        best, found = None, 0
+        pool = []
         for _ in range(trials):
             layout = layout_plan(contacts, labels, size, ball_mm, rng, block_faces)
             if layout is None:
                 continue
-            layout.mobility, layout.margin = plan_mobility(layout.features(), layout.touches, size)
+            features = layout.features()
+            layout.mobility, layout.margin = plan_mobility(features, layout.touches, size)
             lowest = min(lowest, layout.mobility)
             if layout.mobility or layout.margin < MIN_MARGIN:
                 continue
-            found += 1
-            layout.information = plan_information(layout.features(), layout.touches + layout.checks, size)
-            if best is None or layout.information > best.information:
-                best = layout
-            if found == keep:
+            layout.information = plan_information(features, layout.touches + layout.checks, size)
+            pool.append(layout)
+            if len(pool) == keep:
                 break
-        if best is not None:
-            return refined(best, contacts, labels, ball_mm, rng, steps), lowest
+        if pool:
+            pool.sort(key=lambda layout: -layout.information)
+            return max((refined(layout, contacts, labels, ball_mm, rng, steps) for layout in pool[:starts]),
+                       key=lambda layout: layout.information), lowest
     return None, lowest
 
 
-def _nudged(piece: Piece, size, rng) -> Piece:
-    """The piece moved a little: foot, direction, sizes and phase (a step of :func:`refined`)."""
-    w = _unit(piece.w + rng.normal(0.0, NUDGE_RAD, 3))
-    foot = piece.foot + np.r_[rng.normal(0.0, NUDGE * size, 2), 0.0]
+def _nudged(piece: Piece, size, rng, scale) -> Piece:
+    """The piece moved a little, ``scale`` times the nudge: foot, direction, sizes and phase (a step of
+    :func:`refined`)."""
+    w = _unit(piece.w + rng.normal(0.0, scale * NUDGE_RAD, 3))
+    foot = piece.foot + np.r_[rng.normal(0.0, scale * NUDGE * size, 2), 0.0]
     ridge = None if piece.ridge is None else _unit(piece.ridge - (piece.ridge @ w) * w)
-    grow = np.exp(rng.normal(0.0, NUDGE, 3))
+    grow = np.exp(rng.normal(0.0, scale * NUDGE_GROWTH_LOG, 3))
     return Piece(piece.id, piece.element, foot, w, piece.radius * grow[0], piece.length * grow[1], ridge,
-                 piece.head_radius * grow[2], piece.phase + rng.normal(0.0, NUDGE_RAD))
+                 piece.head_radius * grow[2], piece.phase + rng.normal(0.0, scale * NUDGE_RAD))
+
+
+def _better(layout, contacts, labels, ball_mm, rng, pieces, turns, moved):
+    """The layout of these pieces and sensor turns when the piece ``moved`` still prints, the pieces fit and
+    are reached, the default plan carries more information than ``layout``'s and the minimal plan locates;
+    else None. The information is tested first: most nudges fail there, and the mobility costs as much."""
+    if not (all(math.degrees(math.asin(min(1.0, piece.w[2]))) >= MIN_ELEVATION_DEG
+                and (piece.element != "S" or piece.radius <= MAX_STALK_OF_BALL * piece.head_radius)
+                and _as_drawn(piece, labels.count(piece.id), layout.size)
+                for piece in pieces if piece.id == moved) and _fits(pieces, layout.size)):
+        return None
+    candidate = planned(contacts, labels, layout.size, ball_mm, pieces, layout.faces, rng, turns)
+    if candidate is None:
+        return None
+    features = candidate.features()
+    candidate.information = plan_information(features, candidate.touches + candidate.checks, layout.size)
+    if not candidate.information > layout.information:
+        return None
+    candidate.mobility, candidate.margin = plan_mobility(features, candidate.touches, layout.size)
+    return candidate if not candidate.mobility and candidate.margin >= MIN_MARGIN else None
 
 
 def refined(layout, contacts, labels, ball_mm, rng, steps=REFINE_STEPS):
-    """The layout improved by random nudges of one piece at a time, each kept when the pieces still fit,
-    print and are reached, the minimal plan still locates and the default plan's information grows."""
+    """The layout improved by random nudges of one feature at a time (a piece: its foot, direction, sizes
+    and phase; and the turns of its touches' line and cylinder sensors), each kept when the pieces still
+    fit, print and are reached, the default plan's information grows and the minimal plan still locates.
+    The nudges grow after one kept and shrink after one not (the one-fifth rule), so that they stay large
+    while they pay."""
     size = layout.size
-    for _ in range(steps if layout.pieces else 0):
-        pieces = list(layout.pieces)
-        k = int(rng.integers(len(pieces)))
-        pieces[k] = _nudged(pieces[k], size, rng)
-        piece = pieces[k]
-        if (math.degrees(math.asin(min(1.0, piece.w[2]))) < MIN_ELEVATION_DEG
-                or (piece.element == "S" and piece.radius > MAX_STALK_OF_BALL * piece.head_radius)
-                or not _fits(pieces, size)):
-            continue
-        candidate = planned(contacts, labels, size, ball_mm, pieces, layout.faces, rng)
-        if candidate is None:
-            continue
-        candidate.mobility, candidate.margin = plan_mobility(candidate.features(), candidate.touches, size)
-        if candidate.mobility or candidate.margin < MIN_MARGIN:
-            continue
-        candidate.information = plan_information(candidate.features(), candidate.touches + candidate.checks, size)
-        if candidate.information > layout.information:
-            layout = candidate
+    laid = {fid for ctype, fid in zip(contacts, labels) if ctype.sensor in ("L", "C")}  # turns that matter
+    units = [piece.id for piece in layout.pieces] + sorted(laid - {piece.id for piece in layout.pieces})
+    scale = 1.0
+    for _ in range(steps if units else 0):
+        fid = units[int(rng.integers(len(units)))]
+        pieces = [_nudged(piece, size, rng, scale) if piece.id == fid else piece for piece in layout.pieces]
+        turns = {key: turn if key[0] != fid or turn is None else turn + rng.normal(0.0, scale * NUDGE_RAD)
+                 for key, turn in layout.turns.items()}
+        candidate = _better(layout, contacts, labels, ball_mm, rng, pieces, turns, fid)
+        if candidate is not None:
+            layout, scale = candidate, min(MAX_NUDGE_SCALE, scale * NUDGE_GROWTH)
+        else:
+            scale = max(MIN_NUDGE_SCALE, scale * NUDGE_GROWTH ** -0.25)
     return layout
