@@ -10,6 +10,7 @@ import typer
 from fixturecad import features_json
 from fixturecad.errors import InputError
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM
+from fixturecad.registration_commands import Units
 from fixturecad.staging import staged_folder
 
 app = typer.Typer()
@@ -25,25 +26,28 @@ def calibrate(
     out: Annotated[Path | None, typer.Option(help="As-built folder to write (default: OUT_DIR-asbuilt).")] = None,
     sigma: Annotated[float, typer.Option(help="Measurement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
     force: Annotated[bool, typer.Option(help="Replace an as-built folder fixturecad wrote earlier.")] = False,
+    units: Annotated[Units, typer.Option(help="The measurement file's lengths: mm, m or in (converted to mm).")] = Units.mm,
 ):
     """Fit the printed part's features to measured points; write an as-built fixture folder."""
     from fixturecad.sideprocess import SideProcess
 
     side = SideProcess("calibration", "register")  # ready on the second core while we fit
     try:
-        _calibrate(Path(out_dir), Path(measurements), out, sigma, force, side)
+        _calibrate(Path(out_dir), Path(measurements), out, sigma, force, side, units.value)
     except BaseException:
         side.cancel()
         raise
 
 
-def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool, side) -> None:
+def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool, side, units: str) -> None:
     import numpy as np
 
     from fixturecad.registration.calibration import calibrate as fit
     from fixturecad.registration.datums import DatumScheme
     from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.planning import stored_candidates
     from fixturecad.registration.touchfile import read_touch_csv
+    from fixturecad.registration.units import check_spread, from_units
 
     if not (sigma > 0 and np.isfinite(sigma)):
         raise InputError(f"--sigma must be a positive number of mm, got {sigma}")
@@ -58,6 +62,9 @@ def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool
         raise InputError(f"cannot read measurement file {measurements}: {error}") from None
     try:
         points, _, lines = read_touch_csv(text, list(features))
+        points = {fid: from_units(value, units) for fid, value in points.items()}
+        check_spread(np.concatenate(list(points.values())), list(points), stored_candidates(document),
+                     document.get("volume_mm3"), "the measured points")
         scheme = DatumScheme.from_json(document["datums"])
         zone = float(document["tolerance"]["zone_mm"])
         result = fit(features, scheme, points, sigma, zone, lines)

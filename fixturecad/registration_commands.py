@@ -12,6 +12,7 @@ from fixturecad.errors import InputError
 from fixturecad.staging import check_files, staged_file
 from fixturecad.registration.controllers import FORMATS
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+from fixturecad.registration.units import UNITS_MM
 
 app = typer.Typer()
 
@@ -20,6 +21,9 @@ app = typer.Typer()
 SUCCESS_TRANSLATION_MM = 0.1
 SUCCESS_ROTATION_DEG = 0.1
 SUCCESS_BOUND_FACTOR = 6.0
+MAX_TRIALS = 100_000  # a day's run at the slowest fixtures' second a trial
+MAX_NOISE_MM = 1.0  # beyond any probe: --noise 10 is 10 um given as mm
+ANNOUNCED_S = 60.0  # a run predicted longer than this says how long before it goes on
 PLOT_NAME = "simulation.png"
 SUMMARY_NAME = "simulation.json"
 
@@ -49,6 +53,7 @@ def load_routine(out_dir: Path):
 
 
 PoseFormat = Enum("PoseFormat", {name: name for name in FORMATS}, type=str)
+Units = Enum("Units", {name: name for name in UNITS_MM}, type=str)
 
 
 @app.command()
@@ -60,6 +65,7 @@ def register(
     sigma: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
     lever: Annotated[float, typer.Option(help="Sensor size, mm: plane and line sensors tilt by sigma/lever rad.")] = SENSOR_LEVER_MM,
     ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres; default: as the touch file says, a CSV 0).")] = None,
+    units: Annotated[Units, typer.Option(help="The touch file's lengths: mm, m or in (converted to mm).")] = Units.mm,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
     target_sigma: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS translation standard deviation, mm.")] = None,
     target_sigma_deg: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS rotation standard deviation, deg.")] = None,
@@ -75,7 +81,8 @@ def register(
     routine = load_routine(out_dir)
     try:
         result = register_file(routine.FEATURES, routine.register, touches, sigma, lever, ball_radius, fixture_tolerance,
-                               target(target_sigma, target_sigma_deg))
+                               target(target_sigma, target_sigma_deg), units.value,
+                               (routine.CANDIDATES, routine.FEATURES_DOCUMENT.get("volume_mm3")))
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     typer.echo(report(result, pose_format.value, as_json))
@@ -102,16 +109,21 @@ def simulate(
     features spread evenly over the zone) and the errors are split: from the
     touch noise alone (a perfect part), from the part alone (no noise), in all.
     """
+    import time
+
     import numpy as np
 
     from fixturecad.registration.deviations import tolerance_from_document
     from fixturecad.registration.features import features_from_json
     from fixturecad.registration.sampling import TouchSampler, load_mesh
 
-    if trials < 1:
-        raise InputError(f"--trials must be at least 1, got {trials}")
+    if not 1 <= trials <= MAX_TRIALS:
+        raise InputError(f"--trials must be from 1 to {MAX_TRIALS:,}, got {trials}")
     if not (noise >= 0 and noise < float("inf")):
         raise InputError(f"--noise must be a non-negative number of mm, got {noise}")
+    if noise > MAX_NOISE_MM:
+        raise InputError(f"--noise is in mm and at most {MAX_NOISE_MM:g}, got {noise:g}: "
+                         f"for {noise:g} um of noise give --noise {noise / 1000:g}")
     if not (lever > 0 and lever < float("inf")):
         raise InputError(f"--lever must be a positive number of mm, got {lever}")
     _check_tolerance(fixture_tolerance)
@@ -139,7 +151,11 @@ def simulate(
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
         for _ in bar:
+            start = time.perf_counter()
             records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance))
+            if len(records) == 1 and (time.perf_counter() - start) * trials > ANNOUNCED_S:
+                typer.echo(f"simulate: about {(time.perf_counter() - start) * trials / 60:.0f} min for {trials} trials "
+                           f"({time.perf_counter() - start:.2f} s the first); Ctrl-C stops it, writing nothing", err=True)
     summary = summarise(records, noise)
     summary.update({"trials": trials, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,

@@ -35,6 +35,7 @@ from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .contacts import ContactType
 from .elements import KINDS, element
 from .touches import EXTRA_SENSOR_KEYS
+from .units import UNITS_MM, ball_radius_estimate, check_spread, from_units
 
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
@@ -318,13 +319,32 @@ def _fits(value, shape):
             and all(_fits(item, shape[1:]) for item in value))
 
 
-def read_touch_file(path, features):
+def read_touch_file(path, features, units="mm"):
     """(touches, contacts, ball radius, approaches, rows) from a .csv or .json touch file, for
-    ``features`` (dict id -> feature).
+    ``features`` (dict id -> feature), its lengths in ``units`` (:data:`.units.UNITS_MM`) made mm.
 
     ``rows`` names every touch in the engine's order (point touches by feature,
     then the contacts) by where it is in the file: ``row 8 of touches.csv``.
     """
+    touches, contacts, radius, approaches, rows = _read_touch_file(path, features)
+    if units == "mm":
+        return touches, contacts, radius, approaches, rows
+    return ({key: from_units(value, units) for key, value in touches.items()},
+            [_contact_from_units(contact, units) for contact in contacts], radius, approaches, rows)
+
+
+def _contact_from_units(contact, units):
+    """A sensor contact with its lengths (its points and radius, not its directions) in mm."""
+    converted = {**contact, "sensor": {key: value if key in ("kind", "normal", "direction", "axis")
+                                       else from_units(value, units).tolist() for key, value in contact["sensor"].items()}}
+    if "point" in contact:
+        converted["point"] = from_units(contact["point"], units).tolist()
+    if "fixture" in contact:
+        converted["fixture"] = {"o": from_units(contact["fixture"]["o"], units).tolist()}
+    return converted
+
+
+def _read_touch_file(path, features):
     try:
         with open(path, encoding="utf-8") as handle:
             text = handle.read()
@@ -352,12 +372,15 @@ def check_enough(features, touches, contacts, ball_radius_mm):
 
 
 def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM,
-                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None):
+                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None, units="mm", size=(None, None)):
     """Check the options, read a touch file and register it; the result names every touch's row
     (``rows``, in the engine's touch order) and each flagged touch's.
 
-    ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None. The result
-    has ``next_touch`` (see ``register_touches``). Errors are one-line ``ValueError``.
+    ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None. ``units``: the
+    file's lengths (mm, m, in). ``size``: the fixture's reachable touches by feature id and its volume
+    (mm^3), either None, to tell touches in another unit (:mod:`.units`). The result has ``next_touch``
+    (see ``register_touches``). Errors are one-line ``ValueError``: touches whose spread says they are in
+    another unit, or ball centres registered as points.
     """
     if not 0 < sigma_mm < np.inf:
         raise ValueError(f"--sigma must be a positive number of mm, got {sigma_mm}")
@@ -369,16 +392,49 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
         ball_radius(ball_radius_mm, "--ball-radius")
     if target_sigma is not None and not all(x is None or 0 < x < np.inf for x in target_sigma):
         raise ValueError(f"--target-sigma and --target-sigma-deg must be positive numbers, got {target_sigma}")
-    touches, contacts, radius, approaches, rows = read_touch_file(path, features)
+    if units not in UNITS_MM:
+        raise ValueError(f"--units must be one of {', '.join(UNITS_MM)}, got {units!r}")
+    touches, contacts, radius, approaches, rows = read_touch_file(path, features, units)
     radius = radius if ball_radius_mm is None else ball_radius_mm
+    points = [*touches.values(), *(np.reshape(c["point"], (1, 3)) for c in contacts if "point" in c)]
+    if points:
+        check_spread(np.concatenate(points), [*touches, *(c["feature"] for c in contacts)], *size)
     check_enough(features, touches, contacts, radius)
-    result = register(touches, sigma_mm=sigma_mm, ball_radius_mm=radius, contacts=contacts,
-                      approaches=approaches, lever_mm=lever_mm, fixture_tolerance_mm=fixture_tolerance_mm,
-                      plan_next=True, target_sigma=target_sigma)
+    options = dict(sigma_mm=sigma_mm, contacts=contacts, approaches=approaches, lever_mm=lever_mm,
+                   fixture_tolerance_mm=fixture_tolerance_mm)
+    result = register(touches, ball_radius_mm=radius, plan_next=True, target_sigma=target_sigma, **options)
+    if radius == 0 and not contacts:
+        _check_not_ball_centres(features, register, touches, result, options)
     result["touch_rows"] = rows
     for flag in result["flagged"]:
         flag["row"] = rows[flag["touch"]]
     return result
+
+
+# The ball tips looked for: a common offset below the least may be the print, above the most (a 50 mm
+# stylus ball) it is no tip.
+MIN_BALL_RADIUS_MM, MAX_BALL_RADIUS_MM = 0.1, 25.0
+
+
+def _check_not_ball_centres(features, register, touches, result, options):
+    """Refuse point touches that only fit as a ball tip's centres: registered as points they do not (not
+    unique, or a printed feature blamed), at the common offset they are all outside their surfaces they do."""
+    if result["status"] == "unique" and not result["fixture_flagged"]:
+        return
+    poses = [result["pose"], *(s["pose"] for s in result["solutions"]), *(f["pose"] for f in result["flagged"])]
+    pose = next((p for p in poses if p is not None), None)
+    if pose is None:
+        return
+    try:
+        radius = round(ball_radius_estimate(features, touches, pose), 3)
+        if not MIN_BALL_RADIUS_MM <= radius <= MAX_BALL_RADIUS_MM:
+            return
+        as_ball = register(touches, ball_radius_mm=radius, **options)
+    except np.linalg.LinAlgError:  # touches far from any common offset
+        return
+    if as_ball["status"] == "unique" and not as_ball["fixture_flagged"]:
+        raise ValueError(f"every touch lies {radius:g} mm outside its surface, as a ball tip's centres do: "
+                         f"give the tip's radius, --ball-radius {radius:g}")
 
 
 SEARCH_WORDS = {
@@ -473,8 +529,9 @@ def _checked_lines(result, rows):
 
 
 def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEFAULT_SIGMA_MM,
-         default_lever_mm=SENSOR_LEVER_MM):
+         default_lever_mm=SENSOR_LEVER_MM, size=(None, None)):
     """Command line: ``register.py touches.csv [--json] [--format NAME]``; bad input is one line, exit 2.
+    ``size``: the fixture's reachable touches and volume (see :func:`register_file`).
 
     The exit code tells the status: 0 unique, 3 ambiguous, 4 underdetermined,
     5 inconsistent (:data:`EXIT_CODES`), 6 a search that did not complete (:func:`exit_code`).
@@ -491,6 +548,7 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     parser.add_argument("--lever", type=float, default=default_lever_mm,
                         help="sensor size, mm: plane and line sensors tilt by sigma/lever rad")
     parser.add_argument("--ball-radius", type=float, default=None, help="ball tip radius, mm")
+    parser.add_argument("--units", choices=UNITS_MM, default="mm", help="the touch file's lengths (default mm)")
     parser.add_argument("--fixture-tolerance", type=float, default=None,
                         help="profile tolerance zone width of the printed features, mm (default: as recorded; 0: exact)")
     parser.add_argument("--target-sigma", type=float, default=None,
@@ -502,7 +560,8 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # a user sees the result and one-line errors, never Python warnings
             result = register_file(features, register, args.touches, args.sigma, args.lever, args.ball_radius,
-                                   args.fixture_tolerance, target(args.target_sigma, args.target_sigma_deg))
+                                   args.fixture_tolerance, target(args.target_sigma, args.target_sigma_deg),
+                                   args.units, size)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2

@@ -376,3 +376,75 @@ def test_an_interrupted_register_py_says_so(cube, signum):
     process.send_signal(signum)
     stdout, stderr = process.communicate(timeout=60)
     assert process.returncode == 128 + signum and stdout == "" and stderr == "register.py: interrupted\n"
+
+
+# Issue 22: lengths in another unit, ball centres taken for points, simulate's bounds.
+
+def template_rows(folder, name="touches.template.csv"):
+    """The (feature, point) rows of a build's touch template (fixture frame, mm)."""
+    lines = (folder / name).read_text().splitlines()
+    return [(cells[0], [float(x) for x in cells[1:]]) for cells in (line.split(",") for line in lines)
+            if len(cells) == 4 and not cells[0].startswith("#") and cells[0] != "feature"]
+
+
+@pytest.mark.parametrize("unit, per_mm, word", [("m", 1e-3, "metres"), ("in", 1 / 25.4, "inches"),
+                                                ("um", 1e3, "micrometres")])
+def test_touches_in_another_unit_are_refused_naming_it(cube, tmp_path, unit, per_mm, word):
+    path = touches_csv(cube, tmp_path / "t.csv", [f"{f},{x * per_mm!r},{y * per_mm!r},{z * per_mm!r}"
+                                                   for f, (x, y, z) in template_rows(cube)])
+    for out in (run("register", cube, path),
+                subprocess.run([sys.executable, str(cube / "register.py"), str(path)], capture_output=True, text=True)):
+        assert_bad_input(out, word, "mm")
+    if unit == "um":
+        return
+    # Converted, the template's points are the fixture's own: the pose is the identity.
+    for out in (run("register", cube, path, "--units", unit, "--format", "json"),
+                subprocess.run([sys.executable, str(cube / "register.py"), str(path), "--units", unit, "--format", "json"],
+                               capture_output=True, text=True)):
+        assert out.returncode == 0, out.stderr
+        document = json.loads(out.stdout)
+        assert document["status"] == "unique"
+        assert max(abs(v) for row in document["fixture2meas"] for v in row[:3]) == pytest.approx(1.0)
+        assert max(abs(v) for v in document["translation_mm"]) < 1e-6
+
+
+def test_cmm_points_in_metres_are_refused_and_converted(cube, tmp_path):
+    import numpy as np
+
+    example = Path(__file__).resolve().parent.parent / "docs" / "examples" / "cube-cmm.csv"
+    rows = template_rows(example.parent, example.name)
+    path = touches_csv(cube, tmp_path / "cmm-m.csv", [f"{f},{x / 1000!r},{y / 1000!r},{z / 1000!r}" for f, (x, y, z) in rows])
+    assert_bad_input(run("calibrate", cube, path, "--out", tmp_path / "m"), "measured points", "metres", "--units m")
+    assert not (tmp_path / "m").exists()
+    for out, source, units in ((tmp_path / "m", path, "m"), (tmp_path / "mm", example, "mm")):
+        assert run("calibrate", cube, source, "--out", out, "--units", units).returncode == 0
+    features = [json.loads((tmp_path / name / "features.json").read_text())["features"] for name in ("m", "mm")]
+    for converted, given in zip(*features):
+        for key in ("point", "normal"):
+            np.testing.assert_allclose(converted[key], given[key], atol=1e-9)
+
+
+def test_ball_centres_registered_as_points_are_named(built, tmp_path):
+    """A 2 mm ball tip's centres, without --ball-radius: every touch lies 2 mm outside its surface."""
+    import numpy as np
+
+    from fixturecad.registration.features import features_from_json
+
+    folder = built("quarter-sphere")
+    features = features_from_json(json.loads((folder / "features.json").read_text()))
+    shift = np.array([5.0, -3.0, 2.0])
+    rows = [f"{f},{','.join(map(str, (np.array(p) + 2.0 * features[f].normal_at(np.array(p))[0] + shift).tolist()))}"
+            for f, p in template_rows(folder)]
+    path = touches_csv(folder, tmp_path / "ball.csv", rows)
+    assert_bad_input(run("register", folder, path), "2 mm outside", "--ball-radius 2")
+    out = run("register", folder, path, "--ball-radius", 2, "--format", "json")
+    assert out.returncode == 0 and json.loads(out.stdout)["status"] == "unique"
+    assert np.allclose(json.loads(out.stdout)["translation_mm"], shift, atol=1e-6)
+
+
+@pytest.mark.parametrize("option, value, words", [("--noise", 10, ("in mm", "--noise 0.01")),
+                                                  ("--trials", 1_000_000, ("--trials", "100,000"))])
+def test_simulate_bounds_its_noise_and_trials(cube, option, value, words):
+    assert_bad_input(run("simulate", cube, option, value), *words)
+    assert not (cube / "simulation.json").exists()
+
