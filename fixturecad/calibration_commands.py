@@ -11,7 +11,7 @@ from fixturecad import features_json
 from fixturecad.errors import InputError
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM
 from fixturecad.registration_commands import Units
-from fixturecad.staging import staged_folder
+from fixturecad.staging import check_target, staged_folder
 
 app = typer.Typer()
 
@@ -54,7 +54,8 @@ def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool
     document = features_json.read(out_dir)
     if "calibration" in document:
         raise InputError(f"{out_dir} is already an as-built folder: calibrate the folder it was made from")
-    target = Path(out) if out is not None else out_dir.with_name(out_dir.name + "-asbuilt")
+    target = check_target(Path(out) if out is not None else out_dir.with_name(out_dir.name + "-asbuilt"), force,
+                          "as-built", (out_dir,))  # before the fit: a folder it may not write is said at once
     features = features_from_json(document)
     try:
         text = measurements.read_text(encoding="utf-8-sig")
@@ -126,7 +127,7 @@ def format_report(calibration: dict, zone_mm: float) -> str:
 def _write(out_dir: Path, target: Path, document: dict, zone_mm: float, force: bool, side) -> None:
     """The as-built folder, written beside the target and moved into place when complete (the caller cancels
     the side process on failure)."""
-    with staged_folder(target, force) as staging:
+    with staged_folder(target, force, "as-built", inputs=(out_dir,)) as staging:
         for name in COPIED:
             if (out_dir / name).is_file():
                 shutil.copy2(out_dir / name, staging / name)

@@ -70,9 +70,22 @@ def test_force_replaces_only_what_fixturecad_wrote(cube, tmp_path):
     assert_bad_input(run("build", "cube", "--out", theirs, "--force"), "not written by fixturecad")
     assert (theirs / "notes.txt").read_text() == "keep me"
     assert_bad_input(run("build", "cube", "--out", cube), "--force")
-    (cube / "mine.txt").write_text("x")
+    # What fixturecad did not write is kept: a measured-touch file, plans/, simulate's files.
+    (cube / "mine.csv").write_text("x")
+    (cube / "plans").mkdir()
+    (cube / "plans" / "ball.json").write_text("{}")
+    assert run("simulate", cube, "--trials", 2).returncode == 0
+    (cube / "fixture.stl").write_text("old")
     assert run("build", "cube", "--out", cube, "--force").returncode == 0
-    assert not (cube / "mine.txt").exists() and (cube / "features.json").exists()
+    assert (cube / "mine.csv").read_text() == "x" and (cube / "plans" / "ball.json").read_text() == "{}"
+    assert (cube / "simulation.json").exists() and (cube / "fixture.stl").read_bytes() != b"old"
+    written = json.loads((cube / "fixturecad-files.json").read_text())["files"]
+    assert sorted(p.name for p in cube.iterdir() if p.name not in written) == [
+        "fixturecad-files.json", "mine.csv", "plans", "simulation.json", "simulation.png"]
+    # A file the manifest does not list, with the name of one fixturecad writes, is not replaced.
+    written.remove("preview.png")
+    (cube / "fixturecad-files.json").write_text(json.dumps({"files": written}))
+    assert_bad_input(run("build", "cube", "--out", cube, "--force"), "preview.png", "not a file fixturecad wrote")
     empty = tmp_path / "empty"
     empty.mkdir()
     assert run("build", "cube", "--out", empty).returncode == 0
@@ -448,3 +461,16 @@ def test_simulate_bounds_its_noise_and_trials(cube, option, value, words):
     assert_bad_input(run("simulate", cube, option, value), *words)
     assert not (cube / "simulation.json").exists()
 
+
+def test_calibrate_never_writes_over_its_input_nor_a_drawing_over_an_as_built(cube, tmp_path):
+    example = Path(__file__).resolve().parent.parent / "docs" / "examples" / "cube-cmm.csv"
+    before = {p.name: p.read_bytes() for p in cube.iterdir()}
+    for out in (cube, tmp_path):
+        assert_bad_input(run("calibrate", cube, example, "--out", out, "--force"), "the folder this command reads")
+    assert {p.name: p.read_bytes() for p in cube.iterdir()} == before
+    assert run("calibrate", cube, example, "--out", tmp_path / "asbuilt").returncode == 0
+    assert_bad_input(run("build", "cube", "--out", tmp_path / "asbuilt", "--force"), "an as-built folder", "a drawing")
+    assert "calibration" in json.loads((tmp_path / "asbuilt" / "features.json").read_text())
+    drawing = shutil.copytree(cube, tmp_path / "drawing")
+    assert_bad_input(run("calibrate", cube, example, "--out", drawing, "--force"), "is a drawing", "an as-built")
+    assert "calibration" not in json.loads((drawing / "features.json").read_text())

@@ -126,7 +126,7 @@ def test_cli_build_default_folder_prints_it_and_refuses_to_overwrite(tmp_path):
     assert marker.exists()
     forced = run("build", "quarter-sphere", "--radius", "40", "--force", "--stl-tolerance", "0.05", cwd=tmp_path)
     assert forced.returncode == 0, forced.stderr
-    assert not marker.exists() and (folder / "fixture.step").exists()
+    assert marker.read_text() == "old" and (folder / "fixture.step").exists()  # not fixturecad's: kept
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["quarter-sphere-r40"]
 
 
