@@ -58,17 +58,16 @@ def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool
                           "as-built", (out_dir,))  # before the fit: a folder it may not write is said at once
     features = features_from_json(document)
     try:
-        text = measurements.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputError(f"cannot read measurement file {measurements}: {error}") from None
-    try:
-        points, _, lines = read_touch_csv(text, list(features))
+        with open(measurements, encoding="utf-8-sig", newline="") as handle:  # read row by row: a bad row stops it
+            points, _, lines = read_touch_csv(handle, list(features))
         points = {fid: from_units(value, units) for fid, value in points.items()}
         check_spread(np.concatenate(list(points.values())), list(points), stored_candidates(document),
                      document.get("volume_mm3"), "the measured points")
         scheme = DatumScheme.from_json(document["datums"])
         zone = float(document["tolerance"]["zone_mm"])
         result = fit(features, scheme, points, sigma, zone, lines)
+    except (OSError, UnicodeDecodeError) as error:
+        raise InputError(f"cannot read measurement file {measurements}: {error}") from None
     except ValueError as error:
         raise InputError(f"{measurements}: {str(error).splitlines()[0]}") from None
     as_built = _as_built_document(document, result, measurements, zone)

@@ -40,6 +40,10 @@ from .units import UNITS_MM, ball_radius_estimate, check_spread, from_units
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
 MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
+# The most touches a file may hold: ten times a dense scan, a few seconds to read. A JSON file (read whole)
+# may be at most MAX_JSON_BYTES.
+MAX_TOUCH_ROWS = 100_000
+MAX_JSON_BYTES = 100 * MAX_TOUCH_ROWS
 # Exit code of a registration by its status; 2 is bad input, 6 a search that did not complete (:func:`exit_code`).
 EXIT_CODES = {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent": 5}
 INCOMPLETE_EXIT = 6
@@ -54,48 +58,67 @@ def exit_code(result):
     return EXIT_CODES[result["status"]]
 
 
-def read_touch_csv(text, feature_ids):
-    """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
-    file row (line number) of every touch by feature id (lists)."""
-    text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8" starts with a byte order mark
-    reader = csv.reader(io.StringIO(text))
+def read_touch_csv(source, feature_ids):
+    """Touches and approach directions by feature id, arrays (n, 3), and the file row (line number) of
+    every touch by feature id (lists), from CSV text or an open text file.
+
+    A file is read row by row: a refusal comes at the row it concerns, before the rest is read, and
+    memory grows with the rows kept. At most ``MAX_TOUCH_ROWS`` touches.
+    """
+    reader = csv.reader(io.StringIO(source.removeprefix("\ufeff")) if isinstance(source, str) else source)
+    header, count = None, 0
+    touches, approaches, lines = {}, {}, {}
     try:
-        rows = list(reader)
+        for number, row in enumerate(reader, start=1):
+            # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
+            if not row or not any(cell.strip() for cell in row) or row[0].lstrip().startswith("#"):
+                continue
+            if header is None:
+                header = _csv_header(row)
+                continue
+            values = _csv_row(row, header, feature_ids, number)
+            key = row[0].strip()
+            touches.setdefault(key, []).append(values[:3])
+            approaches.setdefault(key, []).append(values[3:] or [np.nan] * 3)
+            lines.setdefault(key, []).append(number)
+            count += 1
+            if count > MAX_TOUCH_ROWS:
+                raise ValueError(f"row {number}: more than {MAX_TOUCH_ROWS:,} touches; a touch file holds at most that many")
     except csv.Error as error:  # a field over csv's limit, a NUL
         raise ValueError(f"row {reader.line_num}: {error}") from None
-    # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
-    numbered = [(k, row) for k, row in enumerate(rows, start=1)
-                if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
-    if not numbered:
+    if header is None:
         raise ValueError("the touch file is empty")
-    header = tuple(cell.strip().lower() for cell in numbered[0][1])
+    if not touches:
+        raise ValueError("the touch file has a header but no touches")
+    arrays = {key: np.array(value) for key, value in approaches.items()}
+    return {key: np.array(value) for key, value in touches.items()}, (arrays if len(header) == 7 else {}), lines
+
+
+def _csv_header(row):
+    header = tuple(cell.strip().lower() for cell in row)
     if header not in (CSV_COLUMNS, CSV_COLUMNS + APPROACH_COLUMNS):
         raise ValueError(
             f"touch CSV must have the columns {','.join(CSV_COLUMNS)} (and optionally "
             f"{','.join(APPROACH_COLUMNS)}), got {','.join(header)}"
         )
-    width = len(header)
-    touches, approaches, lines = {}, {}, {}
-    for line, row in numbered[1:]:
-        if len(row) != width:
-            raise ValueError(f"row {line}: expected {width} values ({','.join(header)}), got {len(row)}")
-        _check_id(row[0].strip(), feature_ids, f"row {line}")
-        try:
-            values = [float(cell) for cell in row[1:]]
-        except ValueError:
-            raise ValueError(f"row {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"row {line}: coordinates must be finite, got {','.join(row[1:])}")
-        _check_range(np.array(values), f"row {line}")
-        if width == 7 and not any(values[3:]):
-            raise ValueError(f"row {line}: the approach direction ax,ay,az is zero: give the direction the probe moved")
-        touches.setdefault(row[0].strip(), []).append(values[:3])
-        approaches.setdefault(row[0].strip(), []).append(values[3:] or [np.nan] * 3)
-        lines.setdefault(row[0].strip(), []).append(line)
-    if not touches:
-        raise ValueError("the touch file has a header but no touches")
-    arrays = {key: np.array(value) for key, value in approaches.items()}
-    return {key: np.array(value) for key, value in touches.items()}, (arrays if width == 7 else {}), lines
+    return header
+
+
+def _csv_row(row, header, feature_ids, line):
+    """A touch row's numbers: x, y, z and, with the approach columns, ax, ay, az (not all zero)."""
+    if len(row) != len(header):
+        raise ValueError(f"row {line}: expected {len(header)} values ({','.join(header)}), got {len(row)}")
+    _check_id(row[0].strip(), feature_ids, f"row {line}")
+    try:
+        values = [float(cell) for cell in row[1:]]
+    except ValueError:
+        raise ValueError(f"row {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"row {line}: coordinates must be finite, got {','.join(row[1:])}")
+    _check_range(np.array(values), f"row {line}")
+    if len(header) == 7 and not any(values[3:]):
+        raise ValueError(f"row {line}: the approach direction ax,ay,az is zero: give the direction the probe moved")
+    return values
 
 
 def touch_csv(entries, plan_name, ball_radius_mm=0.0):
@@ -176,6 +199,8 @@ def read_touch_json(text, features):
         labels.setdefault(entry["feature"], []).extend([where] * len(points))
     if not touches and not contacts:
         raise ValueError("the touch file has no touches")
+    if sum(map(len, touches.values())) + len(contacts) > MAX_TOUCH_ROWS:
+        raise ValueError(f"more than {MAX_TOUCH_ROWS:,} touches; a touch file holds at most that many")
     arrays = {key: np.array(value, dtype=float) for key, value in approaches.items()}
     if all(np.isnan(a).all() for a in arrays.values()):
         arrays = {}
@@ -345,18 +370,22 @@ def _contact_from_units(contact, units):
 
 
 def _read_touch_file(path, features):
+    name = os.path.basename(path)
     try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
+        if str(path).lower().endswith(".json"):
+            if os.path.getsize(path) > MAX_JSON_BYTES:
+                raise ValueError(f"touch file {path} is over {MAX_JSON_BYTES // 10**6} MB: a JSON touch file holds "
+                                 f"at most {MAX_TOUCH_ROWS:,} touches (a CSV is read row by row)")
+            with open(path, encoding="utf-8") as handle:
+                text = handle.read()
+            touches, contacts, radius, approaches, labels = read_touch_json(text, features)
+            return touches, contacts, radius, approaches, [f"{label} of {name}" for label in labels]
+        with open(path, encoding="utf-8-sig", newline="") as handle:  # -sig: Excel's byte order mark
+            touches, approaches, lines = read_touch_csv(handle, features)
     except OSError as error:
         raise ValueError(f"cannot read touch file {path}: {error.strerror}") from None
     except UnicodeDecodeError:
         raise ValueError(f"touch file {path} is not UTF-8 text") from None
-    name = os.path.basename(path)
-    if str(path).lower().endswith(".json"):
-        touches, contacts, radius, approaches, labels = read_touch_json(text, features)
-        return touches, contacts, radius, approaches, [f"{label} of {name}" for label in labels]
-    touches, approaches, lines = read_touch_csv(text, features)
     return touches, [], 0.0, approaches, [f"row {line} of {name}" for key in touches for line in lines[key]]
 
 
@@ -396,10 +425,10 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
         raise ValueError(f"--units must be one of {', '.join(UNITS_MM)}, got {units!r}")
     touches, contacts, radius, approaches, rows = read_touch_file(path, features, units)
     radius = radius if ball_radius_mm is None else ball_radius_mm
+    check_enough(features, touches, contacts, radius)
     points = [*touches.values(), *(np.reshape(c["point"], (1, 3)) for c in contacts if "point" in c)]
     if points:
         check_spread(np.concatenate(points), [*touches, *(c["feature"] for c in contacts)], *size)
-    check_enough(features, touches, contacts, radius)
     options = dict(sigma_mm=sigma_mm, contacts=contacts, approaches=approaches, lever_mm=lever_mm,
                    fixture_tolerance_mm=fixture_tolerance_mm)
     result = register(touches, ball_radius_mm=radius, plan_next=True, target_sigma=target_sigma, **options)

@@ -474,3 +474,51 @@ def test_calibrate_never_writes_over_its_input_nor_a_drawing_over_an_as_built(cu
     drawing = shutil.copytree(cube, tmp_path / "drawing")
     assert_bad_input(run("calibrate", cube, example, "--out", drawing, "--force"), "is a drawing", "an as-built")
     assert "calibration" not in json.loads((drawing / "features.json").read_text())
+
+
+# Issue 22: reading is streamed and bounded.
+
+@pytest.mark.parametrize("command", ["register", "calibrate"])
+def test_a_bad_row_is_reported_before_the_rest_is_read(cube, tmp_path, command):
+    """The touch file is a pipe whose writer sends two rows and then waits: a reader that wanted the whole
+    file first would wait with it."""
+    import threading
+
+    pipe = tmp_path / "touches.csv"
+    os.mkfifo(pipe)
+    done = threading.Event()
+
+    def writer():
+        with open(pipe, "w") as handle:
+            handle.write("feature,x,y,z\nnosuch,1,2,3\n")
+            handle.flush()
+            done.wait(60)
+
+    thread = threading.Thread(target=writer)
+    thread.start()
+    try:
+        out = subprocess.run([sys.executable, "-c", "from fixturecad.cli import main; main()", command, str(cube),
+                              str(pipe)], capture_output=True, text=True, timeout=50)
+    finally:
+        done.set()
+        thread.join()
+    assert_bad_input(out, "row 2", "unknown feature 'nosuch'")
+
+
+def test_a_touch_file_past_the_limit_is_refused(cube, tmp_path):
+    from fixturecad.registration.touchfile import MAX_TOUCH_ROWS
+
+    path = touches_csv(cube, tmp_path / "t.csv", ["top,10,10,50"] * (MAX_TOUCH_ROWS + 1))
+    assert_bad_input(run("register", cube, path), f"row {MAX_TOUCH_ROWS + 2}", "more than 100,000 touches")
+
+
+def test_a_long_simulation_says_how_long_before_it_goes_on(cube, tmp_path):
+    process = subprocess.Popen([sys.executable, "-c", "from fixturecad.cli import main; main()", "simulate", str(cube),
+                                "--trials", "100000", "--out", str(tmp_path / "sim")], stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stderr.readline()
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=60)
+    assert line.startswith("simulate: about ") and "min for 100000 trials" in line
+    assert not list((tmp_path / "sim").glob("*"))
