@@ -74,7 +74,7 @@ def register(
 
     Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 2 bad input.
     """
-    from fixturecad.registration.touchfile import exit_code, register_file, report, target
+    from fixturecad.registration.touchfile import exit_code, register_file, repeated_warning, report, target
 
     if not Path(out_dir).is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
@@ -85,6 +85,8 @@ def register(
                                (routine.CANDIDATES, routine.FEATURES_DOCUMENT.get("volume_mm3")))
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
+    if repeated_warning(result):
+        typer.echo(f"fixturecad: {repeated_warning(result)}", err=True)
     typer.echo(report(result, pose_format.value, as_json))
     raise typer.Exit(exit_code(result))
 

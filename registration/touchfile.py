@@ -435,9 +435,32 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
     if radius == 0 and not contacts:
         _check_not_ball_centres(features, register, touches, result, options)
     result["touch_rows"] = rows
+    result["repeated_rows"] = repeated_rows(touches, rows)
     for flag in result["flagged"]:
         flag["row"] = rows[flag["touch"]]
     return result
+
+
+def repeated_rows(touches, rows):
+    """[[row, the earlier row it repeats], ...]: point touches given twice (same feature, same point), which
+    check nothing but look as if they did. ``rows`` names the touches in the engine's order."""
+    repeats, start = [], 0
+    for points in touches.values():
+        _, first, inverse = np.unique(np.asarray(points), axis=0, return_index=True, return_inverse=True)
+        earlier = first[np.reshape(inverse, -1)]
+        repeats += [[rows[start + k], rows[start + e]] for k, e in enumerate(earlier) if e != k]
+        start += len(points)
+    return repeats
+
+
+def repeated_warning(result):
+    """The one warning line of a result whose touch file repeats rows, or None."""
+    repeats = result.get("repeated_rows")
+    if not repeats:
+        return None
+    more = f" (and {len(repeats) - 1} more)" if len(repeats) > 1 else ""
+    return (f"warning: {repeats[0][0]} repeats {repeats[0][1]}{more}: a repeated touch checks nothing; "
+            "touch again elsewhere")
 
 
 # The ball tips looked for: a common offset below the least may be the print, above the most (a 50 mm
@@ -594,6 +617,8 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2
+    if repeated_warning(result):
+        print(f"{prog}: {repeated_warning(result)}", file=sys.stderr)
     try:
         print(report(result, args.format, args.json), flush=True)
     except BrokenPipeError:
