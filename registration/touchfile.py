@@ -474,11 +474,8 @@ def _check_not_ball_centres(features, register, touches, result, options):
     if result["status"] == "unique" and not result["fixture_flagged"]:
         return
     poses = [result["pose"], *(s["pose"] for s in result["solutions"]), *(f["pose"] for f in result["flagged"])]
-    pose = next((p for p in poses if p is not None), None)
-    if pose is None:
-        return
     try:
-        radius = round(ball_radius_estimate(features, touches, pose), 3)
+        radius = round(ball_radius_estimate(features, touches, [p for p in poses if p is not None][:1]), 3)
         if not MIN_BALL_RADIUS_MM <= radius <= MAX_BALL_RADIUS_MM:
             return
         as_ball = register(touches, ball_radius_mm=radius, **options)

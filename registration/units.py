@@ -24,6 +24,7 @@ LARGEST_SHARE = 3.0
 # The slips looked for: the factor by which mm are too many (> 1) or too few (< 1).
 SLIPS = {"m": 1000.0, "in": 25.4, "um": 1e-3}
 RADIUS_STEP_MM = 1e-3  # the finite-difference step of the ball radius, and its least value
+COMMON_TIPS_MM = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)  # ball radii of common styli: where the search for one starts
 
 
 def spread_mm(points):
@@ -59,23 +60,30 @@ def from_units(points, unit):
     return np.asarray(points, float) * UNITS_MM[unit]
 
 
-def ball_radius_estimate(features, touches, fixture2meas, steps=4):
-    """The radius (mm) of a ball tip whose centres ``touches`` (by feature id, (n, 3), mm) would be, near
-    the pose ``fixture2meas`` (4x4): every touch lies that far outside its surface. The rows are nearly
-    linear in it, so a few Gauss-Newton steps over the pose and the radius find it."""
+def ball_radius_estimate(features, touches, poses=(), steps=4):
+    """The radius (mm) of a ball tip whose centres ``touches`` (by feature id, (n, 3), mm) would be: every
+    touch lies that far outside its surface. The rows are nearly linear in it, so a few Gauss-Newton steps
+    over the pose and the radius find it, from each of ``poses`` (4x4) and of the best poses the closed-form
+    starts find for common tips; the radius that fits best."""
     from .pose import apply_twist, rt_from_fixture2meas
     from .problem import Problem
+    from .solve import solve
     from .touches import build_groups
 
-    def rows(radius):
+    def rows(radius, rotation, translation):
         return Problem(build_groups(features, touches, radius)).sensor_rows(rotation, translation)
 
-    rotation, translation = rt_from_fixture2meas(np.asarray(fixture2meas, float))
-    radius = RADIUS_STEP_MM  # a ball, however small: its rows are those of every radius
-    for _ in range(steps):
-        r, J = rows(radius)
-        d = (rows(radius + RADIUS_STEP_MM)[0] - r) / RADIUS_STEP_MM
-        step = np.linalg.lstsq(np.column_stack([J, d]), -r, rcond=None)[0]
-        rotation, translation = apply_twist(rotation, translation, step[:6])
-        radius = max(radius + float(step[6]), RADIUS_STEP_MM)
-    return radius
+    starts = [*poses, *(solve(Problem(build_groups(features, touches, tip)), None, complete=False)[0].fixture2meas
+                        for tip in COMMON_TIPS_MM)]
+    fits = []
+    for start in starts:
+        rotation, translation = rt_from_fixture2meas(np.asarray(start, float))
+        radius = RADIUS_STEP_MM  # a ball, however small: its rows are those of every radius
+        for _ in range(steps):
+            r, J = rows(radius, rotation, translation)
+            d = (rows(radius + RADIUS_STEP_MM, rotation, translation)[0] - r) / RADIUS_STEP_MM
+            step = np.linalg.lstsq(np.column_stack([J, d]), -r, rcond=None)[0]
+            rotation, translation = apply_twist(rotation, translation, step[:6])
+            radius = max(radius + float(step[6]), RADIUS_STEP_MM)
+        fits.append((float(np.linalg.norm(rows(radius, rotation, translation)[0])), radius))
+    return min(fits)[1]
