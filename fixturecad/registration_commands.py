@@ -70,19 +70,29 @@ def register(
     target_sigma: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS translation standard deviation, mm.")] = None,
     target_sigma_deg: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS rotation standard deviation, deg.")] = None,
 ):
-    """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py.
+    """Pose of the fixture's datum frame (fixture2meas) from touches, on the folder's features.json (the
+    copy in its register.py is for register.py run alone).
 
     Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 2 bad input.
     """
+    from fixturecad.registration.deviations import tolerance_from_document
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.planning import stored_candidates
     from fixturecad.registration.touchfile import exit_code, register_file, repeated_warning, report, target
 
     if not Path(out_dir).is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
-    routine = load_routine(out_dir)
+    document = features_json.read(out_dir)  # one line for a missing, damaged or older features.json
+    features, candidates = features_from_json(document), stored_candidates(document)
+
+    def routine(touches, fixture_tolerance_mm=None, **options):
+        return register_touches(features, touches, tolerance=tolerance_from_document(features, document, fixture_tolerance_mm),
+                                candidates=candidates, **options)
+
     try:
-        result = register_file(routine.FEATURES, routine.register, touches, sigma, lever, ball_radius, fixture_tolerance,
-                               target(target_sigma, target_sigma_deg), units.value,
-                               (routine.CANDIDATES, routine.FEATURES_DOCUMENT.get("volume_mm3")))
+        result = register_file(features, routine, touches, sigma, lever, ball_radius, fixture_tolerance,
+                               target(target_sigma, target_sigma_deg), units.value, (candidates, document.get("volume_mm3")))
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     if repeated_warning(result):
