@@ -47,10 +47,14 @@ def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool
     from fixturecad.registration.features import features_from_json
     from fixturecad.registration.planning import stored_candidates
     from fixturecad.registration.touchfile import read_touch_csv
-    from fixturecad.registration.units import check_spread, from_units
+    from fixturecad.registration.units import check_noise, check_spread, from_units
 
     if not (sigma > 0 and np.isfinite(sigma)):
         raise InputError(f"--sigma must be a positive number of mm, got {sigma}")
+    try:
+        check_noise(sigma, "--sigma")
+    except ValueError as error:
+        raise InputError(str(error)) from None
     document = features_json.read(out_dir)
     if "calibration" in document:
         raise InputError(f"{out_dir} is already an as-built folder: calibrate the folder it was made from")

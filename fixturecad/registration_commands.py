@@ -12,7 +12,7 @@ from fixturecad.errors import InputError
 from fixturecad.staging import check_files, staged_file
 from fixturecad.registration.controllers import FORMATS
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
-from fixturecad.registration.units import UNITS_MM
+from fixturecad.registration.units import UNITS_MM, check_noise
 
 app = typer.Typer()
 
@@ -22,7 +22,6 @@ SUCCESS_TRANSLATION_MM = 0.1
 SUCCESS_ROTATION_DEG = 0.1
 SUCCESS_BOUND_FACTOR = 6.0
 MAX_TRIALS = 100_000  # a day's run at the slowest fixtures' second a trial
-MAX_NOISE_MM = 1.0  # beyond any probe: --noise 10 is 10 um given as mm
 ANNOUNCED_S = 60.0  # a run predicted longer than this says how long before it goes on
 PLOT_NAME = "simulation.png"
 SUMMARY_NAME = "simulation.json"
@@ -133,9 +132,10 @@ def simulate(
         raise InputError(f"--trials must be from 1 to {MAX_TRIALS:,}, got {trials}")
     if not (noise >= 0 and noise < float("inf")):
         raise InputError(f"--noise must be a non-negative number of mm, got {noise}")
-    if noise > MAX_NOISE_MM:
-        raise InputError(f"--noise is in mm and at most {MAX_NOISE_MM:g}, got {noise:g}: "
-                         f"for {noise:g} um of noise give --noise {noise / 1000:g}")
+    try:
+        check_noise(noise, "--noise")
+    except ValueError as error:
+        raise InputError(str(error)) from None
     if not (lever > 0 and lever < float("inf")):
         raise InputError(f"--lever must be a positive number of mm, got {lever}")
     _check_tolerance(fixture_tolerance)

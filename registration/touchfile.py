@@ -35,7 +35,7 @@ from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .contacts import ContactType
 from .elements import KINDS, element
 from .touches import EXTRA_SENSOR_KEYS
-from .units import UNITS_MM, ball_radius_estimate, check_spread, from_units
+from .units import UNITS_MM, ball_radius_estimate, check_ball_radius, check_noise, check_spread, from_units, reach_mm
 
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
@@ -413,6 +413,7 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
     """
     if not 0 < sigma_mm < np.inf:
         raise ValueError(f"--sigma must be a positive number of mm, got {sigma_mm}")
+    check_noise(sigma_mm, "--sigma")
     if not 0 < lever_mm < np.inf:
         raise ValueError(f"--lever must be a positive number of mm, got {lever_mm}")
     if fixture_tolerance_mm is not None and not 0 <= fixture_tolerance_mm < np.inf:
@@ -427,8 +428,10 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
     radius = radius if ball_radius_mm is None else ball_radius_mm
     check_enough(features, touches, contacts, radius)
     points = [*touches.values(), *(np.reshape(c["point"], (1, 3)) for c in contacts if "point" in c)]
+    touched = [*touches, *(c["feature"] for c in contacts)]
     if points:
-        check_spread(np.concatenate(points), [*touches, *(c["feature"] for c in contacts)], *size)
+        check_spread(np.concatenate(points), touched, *size)
+    check_ball_radius(radius, reach_mm(touched, *size))
     options = dict(sigma_mm=sigma_mm, contacts=contacts, approaches=approaches, lever_mm=lever_mm,
                    fixture_tolerance_mm=fixture_tolerance_mm)
     result = register(touches, ball_radius_mm=radius, plan_next=True, target_sigma=target_sigma, **options)

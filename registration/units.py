@@ -23,8 +23,23 @@ SMALLEST_SHARE = 0.1
 LARGEST_SHARE = 3.0
 # The slips looked for: the factor by which mm are too many (> 1) or too few (< 1).
 SLIPS = {"m": 1000.0, "in": 25.4, "um": 1e-3}
+MAX_NOISE_MM = 1.0  # a touch noise beyond any probe: --noise 10 is 10 um given as mm
 RADIUS_STEP_MM = 1e-3  # the finite-difference step of the ball radius, and its least value
 COMMON_TIPS_MM = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0)  # ball radii of common styli: where the search for one starts
+
+
+def check_noise(value_mm, option):
+    """Refuse (one-line ValueError) a noise standard deviation beyond any probe: micrometres given as mm."""
+    if value_mm > MAX_NOISE_MM:
+        raise ValueError(f"{option} is in mm and at most {MAX_NOISE_MM:g}, got {value_mm:g}: "
+                         f"for {value_mm:g} um give {option} {value_mm / 1000:g}")
+
+
+def check_ball_radius(radius_mm, reach_mm_):
+    """Refuse (one-line ValueError) a ball tip larger than the features it touches reach: not mm."""
+    if reach_mm_ > 0 and radius_mm > reach_mm_:
+        raise ValueError(f"--ball-radius is in mm: {radius_mm:g} mm is more than the touched features reach "
+                         f"({reach_mm_:.4g} mm); for {radius_mm:g} um give {radius_mm / 1000:g}")
 
 
 def spread_mm(points):

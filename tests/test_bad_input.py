@@ -525,3 +525,14 @@ def test_a_long_simulation_says_how_long_before_it_goes_on(cube, tmp_path):
         process.communicate(timeout=60)
     assert line.startswith("simulate: about ") and "min for 100000 trials" in line
     assert not list((tmp_path / "sim").glob("*"))
+
+
+@pytest.mark.parametrize("command, option, value, words", [
+    ("register", "--sigma", 5, ("--sigma is in mm", "--sigma 0.005")),
+    ("register", "--ball-radius", 1500, ("--ball-radius is in mm", "give 1.5")),
+    ("calibrate", "--sigma", 2, ("--sigma is in mm", "--sigma 0.002"))])
+def test_lengths_in_micrometres_given_as_mm_are_refused(cube, tmp_path, command, option, value, words):
+    out = tmp_path / "asbuilt"
+    extra = ["--out", out] if command == "calibrate" else []
+    assert_bad_input(run(command, cube, cube / "touches.template.csv", option, value, *extra), *words)
+    assert not out.exists()
