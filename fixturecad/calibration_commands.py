@@ -26,20 +26,20 @@ def calibrate(
     out: Annotated[Path | None, typer.Option(help="As-built folder to write (default: OUT_DIR-asbuilt).")] = None,
     sigma: Annotated[float, typer.Option(help="Measurement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
     force: Annotated[bool, typer.Option(help="Replace an as-built folder fixturecad wrote earlier.")] = False,
-    units: Annotated[Units, typer.Option(help="The measurement file's lengths: mm, m or in (converted to mm).")] = Units.mm,
+    units: Annotated[Units | None, typer.Option(help="The measurement file's lengths: mm, m or in (converted to mm); without it mm, and a file that looks like another unit is refused.")] = None,
 ):
     """Fit the printed part's features to measured points; write an as-built fixture folder."""
     from fixturecad.sideprocess import SideProcess
 
     side = SideProcess("calibration", "register")  # ready on the second core while we fit
     try:
-        _calibrate(Path(out_dir), Path(measurements), out, sigma, force, side, units.value)
+        _calibrate(Path(out_dir), Path(measurements), out, sigma, force, side, units and units.value)
     except BaseException:
         side.cancel()
         raise
 
 
-def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool, side, units: str) -> None:
+def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool, side, units: str | None) -> None:
     import numpy as np
 
     from fixturecad.registration.calibration import calibrate as fit
@@ -64,9 +64,10 @@ def _calibrate(out_dir: Path, measurements: Path, out, sigma: float, force: bool
     try:
         with open(measurements, encoding="utf-8-sig", newline="") as handle:  # read row by row: a bad row stops it
             points, _, lines = read_touch_csv(handle, list(features))
-        points = {fid: from_units(value, units) for fid, value in points.items()}
-        check_spread(np.concatenate(list(points.values())), list(points), stored_candidates(document),
-                     document.get("volume_mm3"), "the measured points")
+        points = {fid: from_units(value, units or "mm") for fid, value in points.items()}
+        if units is None:  # units given: the user has said
+            check_spread(np.concatenate(list(points.values())), list(points), stored_candidates(document),
+                         document.get("volume_mm3"), "the measured points")
         scheme = DatumScheme.from_json(document["datums"])
         zone = float(document["tolerance"]["zone_mm"])
         result = fit(features, scheme, points, sigma, zone, lines)

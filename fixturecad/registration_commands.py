@@ -64,7 +64,7 @@ def register(
     sigma: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
     lever: Annotated[float, typer.Option(help="Sensor size, mm: plane and line sensors tilt by sigma/lever rad.")] = SENSOR_LEVER_MM,
     ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres; default: as the touch file says, a CSV 0).")] = None,
-    units: Annotated[Units, typer.Option(help="The touch file's lengths: mm, m or in (converted to mm).")] = Units.mm,
+    units: Annotated[Units | None, typer.Option(help="The touch file's lengths: mm, m or in (converted to mm); without it mm, and a file that looks like another unit is refused.")] = None,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
     target_sigma: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS translation standard deviation, mm.")] = None,
     target_sigma_deg: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS rotation standard deviation, deg.")] = None,
@@ -91,7 +91,7 @@ def register(
 
     try:
         result = register_file(features, routine, touches, sigma, lever, ball_radius, fixture_tolerance,
-                               target(target_sigma, target_sigma_deg), units.value, (candidates, document.get("volume_mm3")))
+                               target(target_sigma, target_sigma_deg), units and units.value, (candidates, document.get("volume_mm3")))
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     if repeated_warning(result):

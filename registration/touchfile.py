@@ -401,12 +401,12 @@ def check_enough(features, touches, contacts, ball_radius_mm):
 
 
 def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM,
-                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None, units="mm", size=(None, None)):
+                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None, units=None, size=(None, None)):
     """Check the options, read a touch file and register it; the result names every touch's row
     (``rows``, in the engine's touch order) and each flagged touch's.
 
     ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None. ``units``: the
-    file's lengths (mm, m, in). ``size``: the fixture's reachable touches by feature id and its volume
+    file's lengths (mm, m, in; None: mm, and the spread is checked for another unit). ``size``: the fixture's reachable touches by feature id and its volume
     (mm^3), either None, to tell touches in another unit (:mod:`.units`). The result has ``next_touch``
     (see ``register_touches``). Errors are one-line ``ValueError``: touches whose spread says they are in
     another unit, or ball centres registered as points.
@@ -422,14 +422,14 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
         ball_radius(ball_radius_mm, "--ball-radius")
     if target_sigma is not None and not all(x is None or 0 < x < np.inf for x in target_sigma):
         raise ValueError(f"--target-sigma and --target-sigma-deg must be positive numbers, got {target_sigma}")
-    if units not in UNITS_MM:
+    if units is not None and units not in UNITS_MM:
         raise ValueError(f"--units must be one of {', '.join(UNITS_MM)}, got {units!r}")
-    touches, contacts, radius, approaches, rows = read_touch_file(path, features, units)
+    touches, contacts, radius, approaches, rows = read_touch_file(path, features, units or "mm")
     radius = radius if ball_radius_mm is None else ball_radius_mm
     check_enough(features, touches, contacts, radius)
     points = [*touches.values(), *(np.reshape(c["point"], (1, 3)) for c in contacts if "point" in c)]
     touched = [*touches, *(c["feature"] for c in contacts)]
-    if points:
+    if points and units is None:  # units given: the user has said
         check_spread(np.concatenate(points), touched, *size)
     check_ball_radius(radius, reach_mm(touched, *size))
     options = dict(sigma_mm=sigma_mm, contacts=contacts, approaches=approaches, lever_mm=lever_mm,
@@ -600,7 +600,8 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     parser.add_argument("--lever", type=float, default=default_lever_mm,
                         help="sensor size, mm: plane and line sensors tilt by sigma/lever rad")
     parser.add_argument("--ball-radius", type=float, default=None, help="ball tip radius, mm")
-    parser.add_argument("--units", choices=UNITS_MM, default="mm", help="the touch file's lengths (default mm)")
+    parser.add_argument("--units", choices=UNITS_MM, default=None,
+                        help="the touch file's lengths (default mm, and a file that looks like another unit is refused)")
     parser.add_argument("--fixture-tolerance", type=float, default=None,
                         help="profile tolerance zone width of the printed features, mm (default: as recorded; 0: exact)")
     parser.add_argument("--target-sigma", type=float, default=None,

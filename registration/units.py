@@ -66,6 +66,7 @@ def check_spread(points, feature_ids, candidates, volume_mm3, what="the touches"
     for unit, factor in SLIPS.items():
         if SMALLEST_SHARE <= factor * spread / reach <= LARGEST_SHARE:
             remedy = "convert them to mm" if unit == "um" else f"convert them to mm or pass --units {unit}"
+            remedy += "; --units mm if they are mm"
             raise ValueError(f"{what} spread over {spread:.4g} mm but the features they name reach {reach:.4g} mm: "
                              f"they look like {UNIT_NAMES[unit]}, fixturecad reads mm ({remedy})")
 

@@ -411,6 +411,10 @@ def test_touches_in_another_unit_are_refused_naming_it(cube, tmp_path, unit, per
     for out in (run("register", cube, path),
                 subprocess.run([sys.executable, str(cube / "register.py"), str(path)], capture_output=True, text=True)):
         assert_bad_input(out, word, "mm")
+    # --units mm says they are mm: registered as they are, not refused (inches even fit the cube's three
+    # planes through one corner, "unique" with a pose 48 mm off: what the spread check is for).
+    trusted = run("register", cube, path, "--units", "mm")
+    assert trusted.returncode != 2 and trusted.stderr == ""
     if unit == "um":
         return
     # Converted, the template's points are the fixture's own: the pose is the identity.
