@@ -7,6 +7,7 @@ the fixture (the reachable touches a build stores, or else the cube root of
 the part's volume), and a unit that brings the two together is named.
 Touches made with a ball tip but registered as points lie the tip's radius
 outside every surface: :func:`ball_radius_estimate` finds that common offset.
+A noise over 1 mm or a ball larger than the features is micrometres given as mm.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
@@ -35,11 +36,11 @@ def check_noise(value_mm, option):
                          f"for {value_mm:g} um give {option} {value_mm / 1000:g}")
 
 
-def check_ball_radius(radius_mm, reach_mm_):
-    """Refuse (one-line ValueError) a ball tip larger than the features it touches reach: not mm."""
-    if reach_mm_ > 0 and radius_mm > reach_mm_:
+def check_ball_radius(radius_mm, reach):
+    """Refuse (one-line ValueError) a ball tip larger than the ``reach`` (mm) of the features it touches: not mm."""
+    if reach > 0 and radius_mm > reach:
         raise ValueError(f"--ball-radius is in mm: {radius_mm:g} mm is more than the touched features reach "
-                         f"({reach_mm_:.4g} mm); for {radius_mm:g} um give {radius_mm / 1000:g}")
+                         f"({reach:.4g} mm); for {radius_mm:g} um give {radius_mm / 1000:g}")
 
 
 def spread_mm(points):
