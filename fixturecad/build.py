@@ -53,12 +53,36 @@ def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_T
 
 
 def touch_template(template: "Template") -> str:
-    """touches.template.csv: the default plan's touches, or the first plan that a point probe alone makes."""
+    """touches.template.csv: the default plan's point touches when they locate the part and each is checked by
+    the others (all of the default plan, or what a point probe makes of it), else the first plan that a point
+    probe alone makes."""
     from fixturecad.registration.touchfile import touch_csv
 
     plans = template.touch_plans()
-    name = next(n for n in ["default"] + sorted(plans) if all("sensor" not in e for e in plans[n].touches))
+    points = [e for e in plans["default"].touches if "sensor" not in e]
+    if points and all_checked(template.features(), points):
+        return touch_csv(points, "default" if len(points) == len(plans["default"].touches) else "default, point touches")
+    name = next(n for n in sorted(plans) if all("sensor" not in e for e in plans[n].touches))
     return touch_csv(plans[name].touches, name)
+
+
+def all_checked(features, entries) -> bool:
+    """Whether point-touch plan ``entries`` (fixture frame) locate the part with every touch checked by the
+    others (a redundancy number above zero: an error in it shows in the residuals)."""
+    import numpy as np
+
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.redundancy import redundancy
+    from fixturecad.registration.touches import build_groups
+    from fixturecad.registration.verdict import Solution
+
+    touches = {}
+    for entry in entries:
+        touches.setdefault(entry["feature"], []).extend(np.reshape(entry["points"], (-1, 3)).tolist())
+    problem = Problem(build_groups({f.id: f for f in features}, touches))
+    r, J = problem.evaluate(np.eye(3), np.zeros(3))
+    rank = int(np.linalg.matrix_rank(J))
+    return rank == 6 and not redundancy(problem, Solution(np.eye(3), np.zeros(3), r, J, rank))["unchecked"]
 
 
 def touch_template_json(template: "Template") -> str:

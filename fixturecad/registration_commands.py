@@ -12,6 +12,7 @@ from fixturecad.errors import InputError
 from fixturecad.staging import check_files, staged_file
 from fixturecad.registration.controllers import FORMATS
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
+from fixturecad.registration.units import UNITS_MM, check_noise
 
 app = typer.Typer()
 
@@ -20,6 +21,8 @@ app = typer.Typer()
 SUCCESS_TRANSLATION_MM = 0.1
 SUCCESS_ROTATION_DEG = 0.1
 SUCCESS_BOUND_FACTOR = 6.0
+MAX_TRIALS = 100_000  # a day's run at the slowest fixtures' second a trial
+ANNOUNCED_S = 60.0  # a run predicted longer than this says how long before it goes on
 PLOT_NAME = "simulation.png"
 SUMMARY_NAME = "simulation.json"
 
@@ -49,6 +52,7 @@ def load_routine(out_dir: Path):
 
 
 PoseFormat = Enum("PoseFormat", {name: name for name in FORMATS}, type=str)
+Units = Enum("Units", {name: name for name in UNITS_MM}, type=str)
 
 
 @app.command()
@@ -60,25 +64,40 @@ def register(
     sigma: Annotated[float, typer.Option(help="Sensor placement noise standard deviation, mm (each axis).")] = DEFAULT_SIGMA_MM,
     lever: Annotated[float, typer.Option(help="Sensor size, mm: plane and line sensors tilt by sigma/lever rad.")] = SENSOR_LEVER_MM,
     ball_radius: Annotated[float | None, typer.Option(help="Ball tip radius, mm (touches are ball centres; default: as the touch file says, a CSV 0).")] = None,
+    units: Annotated[Units | None, typer.Option(help="The touch file's lengths: mm, m or in (converted to mm); without it mm, and a file that looks like another unit is refused.")] = None,
     fixture_tolerance: Annotated[float | None, typer.Option(help="Profile tolerance zone width of the printed features, mm (default: as recorded in features.json; 0: an exact part).")] = None,
     target_sigma: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS translation standard deviation, mm.")] = None,
     target_sigma_deg: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS rotation standard deviation, deg.")] = None,
     unlabelled: Annotated[bool, typer.Option(help="Take every point touch as unlabelled: on some plane, sphere or cylinder, not said which (an empty feature in a CSV, null in JSON, is unlabelled already).")] = False,
 ):
-    """Pose of the fixture's datum frame (fixture2meas) from touches, by the fixture's generated register.py.
+    """Pose of the fixture's datum frame (fixture2meas) from touches, on the folder's features.json (the
+    copy in its register.py is for register.py run alone).
 
     Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 2 bad input.
     """
-    from fixturecad.registration.touchfile import exit_code, register_file, report, target
+    from fixturecad.registration.deviations import tolerance_from_document
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.planning import stored_candidates
+    from fixturecad.registration.touchfile import exit_code, register_file, repeated_warning, report, target
 
     if not Path(out_dir).is_dir():
         raise InputError(f"fixture folder {out_dir} does not exist")
-    routine = load_routine(out_dir)
+    document = features_json.read(out_dir)  # one line for a missing, damaged or older features.json
+    features, candidates = features_from_json(document), stored_candidates(document)
+
+    def routine(touches, fixture_tolerance_mm=None, **options):
+        return register_touches(features, touches, tolerance=tolerance_from_document(features, document, fixture_tolerance_mm),
+                                candidates=candidates, **options)
+
     try:
-        result = register_file(routine.FEATURES, routine.register, touches, sigma, lever, ball_radius, fixture_tolerance,
-                               target(target_sigma, target_sigma_deg), unlabelled)
+        result = register_file(features, routine, touches, sigma, lever, ball_radius, fixture_tolerance,
+                               target(target_sigma, target_sigma_deg), units and units.value, (candidates, document.get("volume_mm3")),
+                               unlabelled)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
+    if repeated_warning(result):
+        typer.echo(f"fixturecad: {repeated_warning(result)}", err=True)
     typer.echo(report(result, pose_format.value, as_json))
     raise typer.Exit(exit_code(result))
 
@@ -104,16 +123,22 @@ def simulate(
     features spread evenly over the zone) and the errors are split: from the
     touch noise alone (a perfect part), from the part alone (no noise), in all.
     """
+    import time
+
     import numpy as np
 
     from fixturecad.registration.deviations import tolerance_from_document
     from fixturecad.registration.features import features_from_json
     from fixturecad.registration.sampling import TouchSampler, load_mesh
 
-    if trials < 1:
-        raise InputError(f"--trials must be at least 1, got {trials}")
+    if not 1 <= trials <= MAX_TRIALS:
+        raise InputError(f"--trials must be from 1 to {MAX_TRIALS:,}, got {trials}")
     if not (noise >= 0 and noise < float("inf")):
         raise InputError(f"--noise must be a non-negative number of mm, got {noise}")
+    try:
+        check_noise(noise, "--noise")
+    except ValueError as error:
+        raise InputError(str(error)) from None
     if not (lever > 0 and lever < float("inf")):
         raise InputError(f"--lever must be a positive number of mm, got {lever}")
     _check_tolerance(fixture_tolerance)
@@ -141,7 +166,11 @@ def simulate(
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
         for _ in bar:
+            start = time.perf_counter()
             records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance, unlabelled))
+            if len(records) == 1 and (time.perf_counter() - start) * trials > ANNOUNCED_S:
+                typer.echo(f"simulate: about {(time.perf_counter() - start) * trials / 60:.0f} min for {trials} trials "
+                           f"({time.perf_counter() - start:.2f} s the first); Ctrl-C stops it, writing nothing", err=True)
     summary = summarise(records, noise)
     summary.update({"trials": trials, "unlabelled": unlabelled, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,

@@ -7,7 +7,12 @@ SIGTERM) removes its temporary folder and exits with 130 or 143; one left by
 a killed process (its pid no longer running) is removed by the next command
 writing beside it. An
 existing target is replaced only with ``force``, and only if it is a folder
-fixturecad wrote (it holds a fixturecad features.json) or an empty folder.
+fixturecad wrote (it holds a fixturecad features.json) or an empty folder;
+never a command's own input folder, nor a drawing by an as-built folder or
+the reverse. Each folder lists what fixturecad wrote in it (:data:`MANIFEST`):
+``force`` replaces those files and keeps every other one (a user's touch
+files, ``plans/``, ``simulation.*``), hard-linked into the new folder before
+it is moved in, so that an interruption loses nothing.
 """
 
 import json
@@ -21,6 +26,8 @@ from fixturecad.errors import InputError, write_error
 from fixturecad.interrupt import removing
 
 FEATURES_SCHEMA_PREFIX = "fixturecad.features/"  # any version: a folder from an older fixturecad is still ours
+MANIFEST = "fixturecad-files.json"  # {"files": [...]}: the files fixturecad wrote in a folder, relative paths
+KINDS = {"drawing": "a drawing (fixturecad build or design)", "as-built": "an as-built folder (fixturecad calibrate)"}
 
 
 def written_by_fixturecad(folder: Path) -> bool:
@@ -32,8 +39,27 @@ def written_by_fixturecad(folder: Path) -> bool:
     return isinstance(document, dict) and str(document.get("schema", "")).startswith(FEATURES_SCHEMA_PREFIX)
 
 
-def check_target(target: Path, force: bool) -> Path:
-    """The target folder if it may be written; InputError (one line) naming the reason if not."""
+def folder_kind(folder: Path) -> str:
+    """``drawing`` or ``as-built``: what a folder fixturecad wrote holds (its features.json has a calibration)."""
+    try:
+        document = json.loads((Path(folder) / "features.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return "drawing"
+    return "as-built" if isinstance(document, dict) and "calibration" in document else "drawing"
+
+
+def written_files(folder: Path):
+    """The files (relative paths) fixturecad wrote in ``folder`` by its manifest; None without one."""
+    try:
+        manifest = json.loads((Path(folder) / MANIFEST).read_text(encoding="utf-8"))
+        return {str(name) for name in manifest["files"]}
+    except (OSError, ValueError, RecursionError, KeyError, TypeError):
+        return None
+
+
+def check_target(target: Path, force: bool, kind: str = "drawing", inputs=()) -> Path:
+    """The target folder if it may be written with a folder of ``kind`` by a command that reads the folders
+    ``inputs``; InputError (one line) naming the reason if not."""
     if str(target) in ("", "."):
         raise InputError("the output folder must be a new folder, not the current one")
     target = Path(target)
@@ -43,6 +69,9 @@ def check_target(target: Path, force: bool) -> Path:
     existing = next(folder for folder in resolved.parents if folder.exists())
     if not existing.is_dir():
         raise InputError(f"{existing} is a file, not a folder: cannot write {target}")
+    for folder in inputs:
+        if resolved == Path(folder).resolve() or resolved in Path(folder).resolve().parents:
+            raise InputError(f"{target} is or holds {folder}, the folder this command reads: choose another output folder")
     if target.is_symlink() or (target.exists() and not target.is_dir()):
         raise InputError(f"{target} exists and is not a folder; fixturecad replaces only folders it wrote")
     if target.is_dir() and any(target.iterdir()):
@@ -50,18 +79,23 @@ def check_target(target: Path, force: bool) -> Path:
             raise InputError(f"{target} already exists; pass --force to replace it")
         if not written_by_fixturecad(target):
             raise InputError(f"{target} was not written by fixturecad (no fixturecad features.json): not replaced")
+        if folder_kind(target) != kind:
+            raise InputError(f"{target} is {KINDS[folder_kind(target)]}: not replaced by {KINDS[kind]}; "
+                             "choose another output folder")
     return target
 
 
 @contextmanager
-def staged_folder(target: Path, force: bool = False):
-    """Yield an empty temporary folder beside ``target``; move it into place when the block completes.
+def staged_folder(target: Path, force: bool = False, kind: str = "drawing", inputs=()):
+    """Yield an empty temporary folder beside ``target``; move it into place when the block completes, with
+    its manifest and the files of the target fixturecad did not write.
 
     On any error or interruption the temporary folder is removed and the
     target is left as it was. OSErrors become one-line errors: an InputError
     (a read-only or missing parent), an EnvironmentFault (a full disk).
+    See :func:`check_target` for ``kind`` and ``inputs``.
     """
-    target = check_target(target, force)
+    target = check_target(target, force, kind, inputs)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         _remove_stale(target)
@@ -72,6 +106,9 @@ def staged_folder(target: Path, force: bool = False):
     try:
         with removing(staging):
             yield staging
+            _write_manifest(staging)
+            if target.exists():
+                _keep_theirs(target, staging)
             _move_into_place(staging, target)
     except OSError as error:
         shutil.rmtree(staging, ignore_errors=True)
@@ -141,6 +178,33 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def _files(folder: Path) -> set:
+    return {str(path.relative_to(folder)) for path in folder.rglob("*") if path.is_file() or path.is_symlink()}
+
+
+def _write_manifest(staging: Path) -> None:
+    files = sorted(_files(staging))
+    (staging / MANIFEST).write_text(json.dumps({"files": files}, indent=1) + "\n", encoding="utf-8")
+
+
+def _keep_theirs(target: Path, staging: Path) -> None:
+    """Link the target's files fixturecad did not write into ``staging`` (a folder without a manifest: every
+    file but those written anew). InputError if one of them has the name of a new file."""
+    new = _files(staging)
+    ours = written_files(target)
+    theirs = _files(target) - (new if ours is None else ours) - {MANIFEST}
+    clash = sorted(theirs & new)
+    if clash:
+        raise InputError(f"{target / clash[0]} is not a file fixturecad wrote but has the name of one: "
+                         "move it away to replace the folder")
+    for name in sorted(theirs):
+        (staging / name).parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(target / name, staging / name, follow_symlinks=False)
+        except OSError:  # a file system without hard links
+            shutil.copy2(target / name, staging / name, follow_symlinks=False)
 
 
 def _move_into_place(staging: Path, target: Path) -> None:

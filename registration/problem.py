@@ -8,7 +8,7 @@ import numpy as np
 
 from .contacts import DIRECTION_KEYS, POINT_KEYS, residuals_and_jacobian
 from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
-from .deviations import deviation_rows
+from .deviations import deviation_rows, whitening
 from .noise import is_point_sensor, placement_centre, whitened
 from .touches import TouchGroup
 
@@ -60,10 +60,8 @@ class Problem:
         r, J = self.sensor_rows(rotation, translation)
         if self.tolerance is None:
             return r, J
-        Jd = deviation_rows(self, self.tolerance, rotation, translation, J)
-        C = np.eye(len(r)) + Jd @ self.tolerance.covariance @ Jd.T / self.sigma**2
-        whitened = np.linalg.solve(np.linalg.cholesky(C), np.column_stack([r, J]))
-        return whitened[:, 0], whitened[:, 1:]
+        whiten = whitening(self.tolerance, deviation_rows(self, self.tolerance, rotation, translation, J), self.sigma)
+        return whiten(r), whiten(J)
 
     def as_noise(self):
         """The same touches with the part's deviations taken as independent noise on every row."""

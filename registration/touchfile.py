@@ -35,10 +35,15 @@ from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .contacts import ContactType
 from .elements import KINDS, element
 from .touches import EXTRA_SENSOR_KEYS
+from .units import UNITS_MM, ball_radius_estimate, check_ball_radius, check_noise, check_spread, from_units, reach_mm
 
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
 MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
+# The most touches a file may hold: ten times a dense scan, a few seconds to read. A JSON file (read whole)
+# may be at most MAX_JSON_BYTES.
+MAX_TOUCH_ROWS = 100_000
+MAX_JSON_BYTES = 100 * MAX_TOUCH_ROWS
 # Exit code of a registration by its status; 2 is bad input, 6 a search that did not complete (:func:`exit_code`).
 EXIT_CODES = {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent": 5}
 INCOMPLETE_EXIT = 6
@@ -53,51 +58,69 @@ def exit_code(result):
     return EXIT_CODES[result["status"]]
 
 
-def read_touch_csv(text, feature_ids):
-    """Touches and approach directions by feature id, arrays (n, 3), from CSV text, and the
-    file row (line number) of every touch by feature id (lists); an empty feature is an unlabelled
-    touch, under the id None."""
-    text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8" starts with a byte order mark
-    reader = csv.reader(io.StringIO(text))
+def read_touch_csv(source, feature_ids):
+    """Touches and approach directions by feature id, arrays (n, 3), and the file row (line number) of
+    every touch by feature id (lists), from CSV text or an open text file; an empty feature is an
+    unlabelled touch, under the id None.
+
+    A file is read row by row: a refusal comes at the row it concerns, before the rest is read, and
+    memory grows with the rows kept. At most ``MAX_TOUCH_ROWS`` touches.
+    """
+    reader = csv.reader(io.StringIO(source.removeprefix("\ufeff")) if isinstance(source, str) else source)
+    header, count = None, 0
+    touches, approaches, lines = {}, {}, {}
     try:
-        rows = list(reader)
+        for number, row in enumerate(reader, start=1):
+            # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
+            if not row or not any(cell.strip() for cell in row) or row[0].lstrip().startswith("#"):
+                continue
+            if header is None:
+                header = _csv_header(row)
+                continue
+            values = _csv_row(row, header, feature_ids, number)
+            key = row[0].strip() or None  # an empty feature: an unlabelled touch
+            touches.setdefault(key, []).append(values[:3])
+            approaches.setdefault(key, []).append(values[3:] or [np.nan] * 3)
+            lines.setdefault(key, []).append(number)
+            count += 1
+            if count > MAX_TOUCH_ROWS:
+                raise ValueError(f"row {number}: more than {MAX_TOUCH_ROWS:,} touches; a touch file holds at most that many")
     except csv.Error as error:  # a field over csv's limit, a NUL
         raise ValueError(f"row {reader.line_num}: {error}") from None
-    # Comment lines (#) and blank lines are skipped; the others keep their line number in the file.
-    numbered = [(k, row) for k, row in enumerate(rows, start=1)
-                if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
-    if not numbered:
+    if header is None:
         raise ValueError("the touch file is empty")
-    header = tuple(cell.strip().lower() for cell in numbered[0][1])
+    if not touches:
+        raise ValueError("the touch file has a header but no touches")
+    arrays = {key: np.array(value) for key, value in approaches.items()}
+    return {key: np.array(value) for key, value in touches.items()}, (arrays if len(header) == 7 else {}), lines
+
+
+def _csv_header(row):
+    header = tuple(cell.strip().lower() for cell in row)
     if header not in (CSV_COLUMNS, CSV_COLUMNS + APPROACH_COLUMNS):
         raise ValueError(
             f"touch CSV must have the columns {','.join(CSV_COLUMNS)} (and optionally "
             f"{','.join(APPROACH_COLUMNS)}), got {','.join(header)}"
         )
-    width = len(header)
-    touches, approaches, lines = {}, {}, {}
-    for line, row in numbered[1:]:
-        if len(row) != width:
-            raise ValueError(f"row {line}: expected {width} values ({','.join(header)}), got {len(row)}")
-        label = row[0].strip() or None  # an empty feature: an unlabelled touch
-        if label is not None:
-            _check_id(label, feature_ids, f"row {line}")
-        try:
-            values = [float(cell) for cell in row[1:]]
-        except ValueError:
-            raise ValueError(f"row {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"row {line}: coordinates must be finite, got {','.join(row[1:])}")
-        _check_range(np.array(values), f"row {line}")
-        if width == 7 and not any(values[3:]):
-            raise ValueError(f"row {line}: the approach direction ax,ay,az is zero: give the direction the probe moved")
-        touches.setdefault(label, []).append(values[:3])
-        approaches.setdefault(label, []).append(values[3:] or [np.nan] * 3)
-        lines.setdefault(label, []).append(line)
-    if not touches:
-        raise ValueError("the touch file has a header but no touches")
-    arrays = {key: np.array(value) for key, value in approaches.items()}
-    return {key: np.array(value) for key, value in touches.items()}, (arrays if width == 7 else {}), lines
+    return header
+
+
+def _csv_row(row, header, feature_ids, line):
+    """A touch row's numbers: x, y, z and, with the approach columns, ax, ay, az (not all zero)."""
+    if len(row) != len(header):
+        raise ValueError(f"row {line}: expected {len(header)} values ({','.join(header)}), got {len(row)}")
+    if row[0].strip():
+        _check_id(row[0].strip(), feature_ids, f"row {line}")
+    try:
+        values = [float(cell) for cell in row[1:]]
+    except ValueError:
+        raise ValueError(f"row {line}: coordinates must be numbers, got {','.join(row[1:])}") from None
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"row {line}: coordinates must be finite, got {','.join(row[1:])}")
+    _check_range(np.array(values), f"row {line}")
+    if len(header) == 7 and not any(values[3:]):
+        raise ValueError(f"row {line}: the approach direction ax,ay,az is zero: give the direction the probe moved")
+    return values
 
 
 def touch_csv(entries, plan_name, ball_radius_mm=0.0):
@@ -183,6 +206,8 @@ def read_touch_json(text, features):
         labels.setdefault(entry["feature"], []).extend([where] * len(points))
     if not touches and not contacts:
         raise ValueError("the touch file has no touches")
+    if sum(map(len, touches.values())) + len(contacts) > MAX_TOUCH_ROWS:
+        raise ValueError(f"more than {MAX_TOUCH_ROWS:,} touches; a touch file holds at most that many")
     arrays = {key: np.array(value, dtype=float) for key, value in approaches.items()}
     if all(np.isnan(a).all() for a in arrays.values()):
         arrays = {}
@@ -328,26 +353,48 @@ def _fits(value, shape):
             and all(_fits(item, shape[1:]) for item in value))
 
 
-def read_touch_file(path, features):
+def read_touch_file(path, features, units="mm"):
     """(touches, contacts, ball radius, approaches, rows) from a .csv or .json touch file, for
-    ``features`` (dict id -> feature).
+    ``features`` (dict id -> feature), its lengths in ``units`` (:data:`.units.UNITS_MM`) made mm.
 
     ``rows`` names every touch in the engine's order (point touches by feature,
-    then the contacts, then the unlabelled touches: those under the id None) by
-    where it is in the file: ``row 8 of touches.csv``.
+    then the contacts) by where it is in the file: ``row 8 of touches.csv``.
     """
+    touches, contacts, radius, approaches, rows = _read_touch_file(path, features)
+    if units == "mm":
+        return touches, contacts, radius, approaches, rows
+    return ({key: from_units(value, units) for key, value in touches.items()},
+            [_contact_from_units(contact, units) for contact in contacts], radius, approaches, rows)
+
+
+def _contact_from_units(contact, units):
+    """A sensor contact with its lengths (its points and radius, not its directions) in mm."""
+    converted = {**contact, "sensor": {key: value if key in ("kind", "normal", "direction", "axis")
+                                       else from_units(value, units).tolist() for key, value in contact["sensor"].items()}}
+    if "point" in contact:
+        converted["point"] = from_units(contact["point"], units).tolist()
+    if "fixture" in contact:
+        converted["fixture"] = {"o": from_units(contact["fixture"]["o"], units).tolist()}
+    return converted
+
+
+def _read_touch_file(path, features):
+    name = os.path.basename(path)
     try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
+        if str(path).lower().endswith(".json"):
+            if os.path.getsize(path) > MAX_JSON_BYTES:
+                raise ValueError(f"touch file {path} is over {MAX_JSON_BYTES // 10**6} MB: a JSON touch file holds "
+                                 f"at most {MAX_TOUCH_ROWS:,} touches (a CSV is read row by row)")
+            with open(path, encoding="utf-8") as handle:
+                text = handle.read()
+            touches, contacts, radius, approaches, labels = read_touch_json(text, features)
+            return touches, contacts, radius, approaches, [f"{label} of {name}" for label in labels]
+        with open(path, encoding="utf-8-sig", newline="") as handle:  # -sig: Excel's byte order mark
+            touches, approaches, lines = read_touch_csv(handle, features)
     except OSError as error:
         raise ValueError(f"cannot read touch file {path}: {error.strerror}") from None
     except UnicodeDecodeError:
         raise ValueError(f"touch file {path} is not UTF-8 text") from None
-    name = os.path.basename(path)
-    if str(path).lower().endswith(".json"):
-        touches, contacts, radius, approaches, labels = read_touch_json(text, features)
-        return touches, contacts, radius, approaches, [f"{label} of {name}" for label in labels]
-    touches, approaches, lines = read_touch_csv(text, features)
     order = [key for key in touches if key is not None] + [None] * (None in touches)
     return touches, [], 0.0, approaches, [f"row {line} of {name}" for key in order for line in lines[key]]
 
@@ -366,16 +413,21 @@ def check_enough(features, touches, contacts, ball_radius_mm):
 
 
 def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM,
-                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None, unlabelled=False):
+                  ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None, units=None, size=(None, None),
+                  unlabelled=False):
     """Check the options, read a touch file and register it; the result names every touch's row
     (``rows``, in the engine's touch order) and each flagged touch's.
 
-    ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None.
-    ``unlabelled``: take every point touch as unlabelled, its feature not said. The result
-    has ``next_touch`` (see ``register_touches``). Errors are one-line ``ValueError``.
+    ``ball_radius_mm`` None: as the file says (a CSV: 0). ``target_sigma`` (mm, deg) or None. ``units``: the
+    file's lengths (mm, m, in; None: mm, and the spread is checked for another unit). ``size``: the fixture's reachable touches by feature id and its volume
+    (mm^3), either None, to tell touches in another unit (:mod:`.units`). The result has ``next_touch``
+    (see ``register_touches``). Errors are one-line ``ValueError``: touches whose spread says they are in
+    another unit, or ball centres registered as points. ``unlabelled``: take every point touch as
+    unlabelled, its feature not said.
     """
     if not 0 < sigma_mm < np.inf:
         raise ValueError(f"--sigma must be a positive number of mm, got {sigma_mm}")
+    check_noise(sigma_mm, "--sigma")
     if not 0 < lever_mm < np.inf:
         raise ValueError(f"--lever must be a positive number of mm, got {lever_mm}")
     if fixture_tolerance_mm is not None and not 0 <= fixture_tolerance_mm < np.inf:
@@ -384,7 +436,9 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
         ball_radius(ball_radius_mm, "--ball-radius")
     if target_sigma is not None and not all(x is None or 0 < x < np.inf for x in target_sigma):
         raise ValueError(f"--target-sigma and --target-sigma-deg must be positive numbers, got {target_sigma}")
-    touches, contacts, radius, approaches, rows = read_touch_file(path, features)
+    if units is not None and units not in UNITS_MM:
+        raise ValueError(f"--units must be one of {', '.join(UNITS_MM)}, got {units!r}")
+    touches, contacts, radius, approaches, rows = read_touch_file(path, features, units or "mm")
     radius = radius if ball_radius_mm is None else ball_radius_mm
     if unlabelled and touches:
         # Every point touch unlabelled, in the file's order of them; the contacts now come first.
@@ -394,15 +448,74 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
                                         + ([touches[None]] if None in touches else []))}
         approaches = {}
     check_enough(features, touches, contacts, radius)
-    points = touches.pop(None, None)
+    points = [*touches.values(), *(np.reshape(c["point"], (1, 3)) for c in contacts if "point" in c)]
+    # An unlabelled touch may lie on any surface: its spread is compared with all of them.
+    surfaces = [f.id for f in features.values() if f.kind in ("plane", "sphere", "cylinder")] if None in touches else []
+    touched = [*(key for key in touches if key is not None), *surfaces, *(c["feature"] for c in contacts)]
+    free = touches.pop(None, None)
     approaches.pop(None, None)
-    result = register(touches, sigma_mm=sigma_mm, ball_radius_mm=radius, contacts=contacts,
-                      approaches=approaches, lever_mm=lever_mm, fixture_tolerance_mm=fixture_tolerance_mm,
-                      plan_next=True, target_sigma=target_sigma, **({} if points is None else {"unlabelled": points}))
+    if points and units is None:  # units given: the user has said
+        check_spread(np.concatenate(points), touched, *size)
+    check_ball_radius(radius, reach_mm(touched, *size))
+    options = dict(sigma_mm=sigma_mm, contacts=contacts, approaches=approaches, lever_mm=lever_mm,
+                   fixture_tolerance_mm=fixture_tolerance_mm)
+    if free is not None:
+        options["unlabelled"] = free
+    result = register(touches, ball_radius_mm=radius, plan_next=True, target_sigma=target_sigma, **options)
+    if radius == 0 and not contacts and free is None:
+        _check_not_ball_centres(features, register, touches, result, options)
     result["touch_rows"] = rows
+    labelled = sum(len(v) for v in touches.values()) + len(contacts)
+    result["repeated_rows"] = repeated_rows(touches, rows) + (
+        [] if free is None else repeated_rows({None: free}, rows[labelled:]))
     for flag in result["flagged"]:
         flag["row"] = rows[flag["touch"]]
     return result
+
+
+def repeated_rows(touches, rows):
+    """[[row, the earlier row it repeats], ...]: point touches given twice (same feature, same point), which
+    check nothing but look as if they did. ``rows`` names the touches in the engine's order."""
+    repeats, start = [], 0
+    for points in touches.values():
+        _, first, inverse = np.unique(np.asarray(points), axis=0, return_index=True, return_inverse=True)
+        earlier = first[np.reshape(inverse, -1)]
+        repeats += [[rows[start + k], rows[start + e]] for k, e in enumerate(earlier) if e != k]
+        start += len(points)
+    return repeats
+
+
+def repeated_warning(result):
+    """The one warning line of a result whose touch file repeats rows, or None."""
+    repeats = result.get("repeated_rows")
+    if not repeats:
+        return None
+    more = f" (and {len(repeats) - 1} more)" if len(repeats) > 1 else ""
+    return (f"warning: {repeats[0][0]} repeats {repeats[0][1]}{more}: a repeated touch checks nothing; "
+            "touch again elsewhere")
+
+
+# The ball tips looked for: a common offset below the least may be the print, above the most (a 50 mm
+# stylus ball) it is no tip.
+MIN_BALL_RADIUS_MM, MAX_BALL_RADIUS_MM = 0.1, 25.0
+
+
+def _check_not_ball_centres(features, register, touches, result, options):
+    """Refuse point touches that only fit as a ball tip's centres: registered as points they do not (not
+    unique, or a printed feature blamed), at the common offset they are all outside their surfaces they do."""
+    if result["status"] == "unique" and not result["fixture_flagged"]:
+        return
+    poses = [result["pose"], *(s["pose"] for s in result["solutions"]), *(f["pose"] for f in result["flagged"])]
+    try:
+        radius = round(ball_radius_estimate(features, touches, [p for p in poses if p is not None][:1]), 3)
+        if not MIN_BALL_RADIUS_MM <= radius <= MAX_BALL_RADIUS_MM:
+            return
+        as_ball = register(touches, ball_radius_mm=radius, **options)
+    except np.linalg.LinAlgError:  # touches far from any common offset
+        return
+    if as_ball["status"] == "unique" and not as_ball["fixture_flagged"]:
+        raise ValueError(f"every touch lies {radius:g} mm outside its surface, as a ball tip's centres do: "
+                         f"give the tip's radius, --ball-radius {radius:g}")
 
 
 SEARCH_WORDS = {
@@ -500,8 +613,9 @@ def _checked_lines(result, rows):
 
 
 def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEFAULT_SIGMA_MM,
-         default_lever_mm=SENSOR_LEVER_MM):
+         default_lever_mm=SENSOR_LEVER_MM, size=(None, None)):
     """Command line: ``register.py touches.csv [--json] [--format NAME]``; bad input is one line, exit 2.
+    ``size``: the fixture's reachable touches and volume (see :func:`register_file`).
 
     The exit code tells the status: 0 unique, 3 ambiguous, 4 underdetermined,
     5 inconsistent (:data:`EXIT_CODES`), 6 a search that did not complete (:func:`exit_code`).
@@ -518,6 +632,8 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
     parser.add_argument("--lever", type=float, default=default_lever_mm,
                         help="sensor size, mm: plane and line sensors tilt by sigma/lever rad")
     parser.add_argument("--ball-radius", type=float, default=None, help="ball tip radius, mm")
+    parser.add_argument("--units", choices=UNITS_MM, default=None,
+                        help="the touch file's lengths (default mm, and a file that looks like another unit is refused)")
     parser.add_argument("--fixture-tolerance", type=float, default=None,
                         help="profile tolerance zone width of the printed features, mm (default: as recorded; 0: exact)")
     parser.add_argument("--target-sigma", type=float, default=None,
@@ -532,10 +648,12 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
             warnings.simplefilter("ignore")  # a user sees the result and one-line errors, never Python warnings
             result = register_file(features, register, args.touches, args.sigma, args.lever, args.ball_radius,
                                    args.fixture_tolerance, target(args.target_sigma, args.target_sigma_deg),
-                                   args.unlabelled)
+                                   args.units, size, args.unlabelled)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2
+    if repeated_warning(result):
+        print(f"{prog}: {repeated_warning(result)}", file=sys.stderr)
     try:
         print(report(result, args.format, args.json), flush=True)
     except BrokenPipeError:

@@ -70,9 +70,22 @@ def test_force_replaces_only_what_fixturecad_wrote(cube, tmp_path):
     assert_bad_input(run("build", "cube", "--out", theirs, "--force"), "not written by fixturecad")
     assert (theirs / "notes.txt").read_text() == "keep me"
     assert_bad_input(run("build", "cube", "--out", cube), "--force")
-    (cube / "mine.txt").write_text("x")
+    # What fixturecad did not write is kept: a measured-touch file, plans/, simulate's files.
+    (cube / "mine.csv").write_text("x")
+    (cube / "plans").mkdir()
+    (cube / "plans" / "ball.json").write_text("{}")
+    assert run("simulate", cube, "--trials", 2).returncode == 0
+    (cube / "fixture.stl").write_text("old")
     assert run("build", "cube", "--out", cube, "--force").returncode == 0
-    assert not (cube / "mine.txt").exists() and (cube / "features.json").exists()
+    assert (cube / "mine.csv").read_text() == "x" and (cube / "plans" / "ball.json").read_text() == "{}"
+    assert (cube / "simulation.json").exists() and (cube / "fixture.stl").read_bytes() != b"old"
+    written = json.loads((cube / "fixturecad-files.json").read_text())["files"]
+    assert sorted(p.name for p in cube.iterdir() if p.name not in written) == [
+        "fixturecad-files.json", "mine.csv", "plans", "simulation.json", "simulation.png"]
+    # A file the manifest does not list, with the name of one fixturecad writes, is not replaced.
+    written.remove("preview.png")
+    (cube / "fixturecad-files.json").write_text(json.dumps({"files": written}))
+    assert_bad_input(run("build", "cube", "--out", cube, "--force"), "preview.png", "not a file fixturecad wrote")
     empty = tmp_path / "empty"
     empty.mkdir()
     assert run("build", "cube", "--out", empty).returncode == 0
@@ -97,7 +110,8 @@ def test_an_interrupted_build_leaves_nothing_and_says_so(tmp_path, signum):
 @pytest.mark.parametrize("content", ["", "garbage(\n", "x = 1\n"])
 def test_a_damaged_register_py(cube, content):
     (cube / "register.py").write_text(content)
-    assert_bad_input(run("register", cube, cube / "touches.template.csv"), "register.py", "rebuild")
+    assert_bad_input(run("simulate", cube, "--trials", 2), "register.py", "rebuild")
+    assert run("register", cube, cube / "touches.template.csv").returncode == 0  # on the folder's features.json
 
 
 def test_a_truncated_stl(cube):
@@ -153,14 +167,16 @@ def test_huge_coordinates_in_a_csv(cube, tmp_path):
 
 
 def test_six_identical_touches_warn_nothing(cube, tmp_path):
-    """Underdetermined (exit 4) with the free motions named, and not a Python warning."""
+    """Underdetermined (exit 4) with the free motions named, and no Python warning: only the repeated rows."""
     path = touches_csv(cube, tmp_path / "t.csv", ["top,10,10,50"] * 6)
-    for command in ([sys.executable, "-W", "error", str(cube / "register.py"), str(path)],
-                    [sys.executable, "-W", "error", "-c", "from fixturecad.cli import main; main()", "register",
-                     str(cube), str(path)]):
+    for prog, command in (("register.py", [sys.executable, "-W", "error", str(cube / "register.py"), str(path)]),
+                          ("fixturecad", [sys.executable, "-W", "error", "-c", "from fixturecad.cli import main; main()",
+                                          "register", str(cube), str(path)])):
         out = subprocess.run(command, capture_output=True, text=True)
         assert out.returncode == 4, out.stderr
-        assert out.stderr == "" and "free: planar motion {G_P} in the plane of top" in out.stdout
+        assert out.stderr == (f"{prog}: warning: row 3 of t.csv repeats row 2 of t.csv (and 4 more): "
+                              "a repeated touch checks nothing; touch again elsewhere\n")
+        assert "free: planar motion {G_P} in the plane of top" in out.stdout
 
 
 def test_suggest_bounds_the_counts():
@@ -376,3 +392,151 @@ def test_an_interrupted_register_py_says_so(cube, signum):
     process.send_signal(signum)
     stdout, stderr = process.communicate(timeout=60)
     assert process.returncode == 128 + signum and stdout == "" and stderr == "register.py: interrupted\n"
+
+
+# Issue 22: lengths in another unit, ball centres taken for points, simulate's bounds.
+
+def template_rows(folder, name="touches.template.csv"):
+    """The (feature, point) rows of a build's touch template (fixture frame, mm)."""
+    lines = (folder / name).read_text().splitlines()
+    return [(cells[0], [float(x) for x in cells[1:]]) for cells in (line.split(",") for line in lines)
+            if len(cells) == 4 and not cells[0].startswith("#") and cells[0] != "feature"]
+
+
+@pytest.mark.parametrize("unit, per_mm, word", [("m", 1e-3, "metres"), ("in", 1 / 25.4, "inches"),
+                                                ("um", 1e3, "micrometres")])
+def test_touches_in_another_unit_are_refused_naming_it(cube, tmp_path, unit, per_mm, word):
+    path = touches_csv(cube, tmp_path / "t.csv", [f"{f},{x * per_mm!r},{y * per_mm!r},{z * per_mm!r}"
+                                                   for f, (x, y, z) in template_rows(cube)])
+    for out in (run("register", cube, path),
+                subprocess.run([sys.executable, str(cube / "register.py"), str(path)], capture_output=True, text=True)):
+        assert_bad_input(out, word, "mm")
+    # --units mm says they are mm: registered as they are, not refused (inches even fit the cube's three
+    # planes through one corner, "unique" with a pose 48 mm off: what the spread check is for).
+    trusted = run("register", cube, path, "--units", "mm")
+    assert trusted.returncode != 2 and trusted.stderr == ""
+    if unit == "um":
+        return
+    # Converted, the template's points are the fixture's own: the pose is the identity.
+    for out in (run("register", cube, path, "--units", unit, "--format", "json"),
+                subprocess.run([sys.executable, str(cube / "register.py"), str(path), "--units", unit, "--format", "json"],
+                               capture_output=True, text=True)):
+        assert out.returncode == 0, out.stderr
+        document = json.loads(out.stdout)
+        assert document["status"] == "unique"
+        assert max(abs(v) for row in document["fixture2meas"] for v in row[:3]) == pytest.approx(1.0)
+        assert max(abs(v) for v in document["translation_mm"]) < 1e-6
+
+
+def test_cmm_points_in_metres_are_refused_and_converted(cube, tmp_path):
+    import numpy as np
+
+    example = Path(__file__).resolve().parent.parent / "docs" / "examples" / "cube-cmm.csv"
+    rows = template_rows(example.parent, example.name)
+    path = touches_csv(cube, tmp_path / "cmm-m.csv", [f"{f},{x / 1000!r},{y / 1000!r},{z / 1000!r}" for f, (x, y, z) in rows])
+    assert_bad_input(run("calibrate", cube, path, "--out", tmp_path / "m"), "measured points", "metres", "--units m")
+    assert not (tmp_path / "m").exists()
+    for out, source, units in ((tmp_path / "m", path, "m"), (tmp_path / "mm", example, "mm")):
+        assert run("calibrate", cube, source, "--out", out, "--units", units).returncode == 0
+    features = [json.loads((tmp_path / name / "features.json").read_text())["features"] for name in ("m", "mm")]
+    for converted, given in zip(*features):
+        for key in ("point", "normal"):
+            np.testing.assert_allclose(converted[key], given[key], atol=1e-9)
+
+
+def test_ball_centres_registered_as_points_are_named(built, tmp_path):
+    """A 2 mm ball tip's centres, without --ball-radius: every touch lies 2 mm outside its surface."""
+    import numpy as np
+
+    from fixturecad.registration.features import features_from_json
+
+    folder = built("quarter-sphere")
+    features = features_from_json(json.loads((folder / "features.json").read_text()))
+    shift = np.array([5.0, -3.0, 2.0])
+    rows = [f"{f},{','.join(map(str, (np.array(p) + 2.0 * features[f].normal_at(np.array(p))[0] + shift).tolist()))}"
+            for f, p in template_rows(folder)]
+    path = touches_csv(folder, tmp_path / "ball.csv", rows)
+    assert_bad_input(run("register", folder, path), "2 mm outside", "--ball-radius 2")
+    out = run("register", folder, path, "--ball-radius", 2, "--format", "json")
+    assert out.returncode == 0 and json.loads(out.stdout)["status"] == "unique"
+    assert np.allclose(json.loads(out.stdout)["translation_mm"], shift, atol=1e-6)
+
+
+@pytest.mark.parametrize("option, value, words", [("--noise", 10, ("in mm", "--noise 0.01")),
+                                                  ("--trials", 1_000_000, ("--trials", "100,000"))])
+def test_simulate_bounds_its_noise_and_trials(cube, option, value, words):
+    assert_bad_input(run("simulate", cube, option, value), *words)
+    assert not (cube / "simulation.json").exists()
+
+
+def test_calibrate_never_writes_over_its_input_nor_a_drawing_over_an_as_built(cube, tmp_path):
+    example = Path(__file__).resolve().parent.parent / "docs" / "examples" / "cube-cmm.csv"
+    before = {p.name: p.read_bytes() for p in cube.iterdir()}
+    for out in (cube, tmp_path):
+        assert_bad_input(run("calibrate", cube, example, "--out", out, "--force"), "the folder this command reads")
+    assert {p.name: p.read_bytes() for p in cube.iterdir()} == before
+    assert run("calibrate", cube, example, "--out", tmp_path / "asbuilt").returncode == 0
+    assert_bad_input(run("build", "cube", "--out", tmp_path / "asbuilt", "--force"), "an as-built folder", "a drawing")
+    assert "calibration" in json.loads((tmp_path / "asbuilt" / "features.json").read_text())
+    drawing = shutil.copytree(cube, tmp_path / "drawing")
+    assert_bad_input(run("calibrate", cube, example, "--out", drawing, "--force"), "is a drawing", "an as-built")
+    assert "calibration" not in json.loads((drawing / "features.json").read_text())
+
+
+# Issue 22: reading is streamed and bounded.
+
+@pytest.mark.parametrize("command", ["register", "calibrate"])
+def test_a_bad_row_is_reported_before_the_rest_is_read(cube, tmp_path, command):
+    """The touch file is a pipe whose writer sends two rows and then waits: a reader that wanted the whole
+    file first would wait with it."""
+    import threading
+
+    pipe = tmp_path / "touches.csv"
+    os.mkfifo(pipe)
+    done = threading.Event()
+
+    def writer():
+        with open(pipe, "w") as handle:
+            handle.write("feature,x,y,z\nnosuch,1,2,3\n")
+            handle.flush()
+            done.wait(60)
+
+    thread = threading.Thread(target=writer)
+    thread.start()
+    try:
+        out = subprocess.run([sys.executable, "-c", "from fixturecad.cli import main; main()", command, str(cube),
+                              str(pipe)], capture_output=True, text=True, timeout=50)
+    finally:
+        done.set()
+        thread.join()
+    assert_bad_input(out, "row 2", "unknown feature 'nosuch'")
+
+
+def test_a_touch_file_past_the_limit_is_refused(cube, tmp_path):
+    from fixturecad.registration.touchfile import MAX_TOUCH_ROWS
+
+    path = touches_csv(cube, tmp_path / "t.csv", ["top,10,10,50"] * (MAX_TOUCH_ROWS + 1))
+    assert_bad_input(run("register", cube, path), f"row {MAX_TOUCH_ROWS + 2}", "more than 100,000 touches")
+
+
+def test_a_long_simulation_says_how_long_before_it_goes_on(cube, tmp_path):
+    process = subprocess.Popen([sys.executable, "-c", "from fixturecad.cli import main; main()", "simulate", str(cube),
+                                "--trials", "100000", "--out", str(tmp_path / "sim")], stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stderr.readline()
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=60)
+    assert line.startswith("simulate: about ") and "min for 100000 trials" in line
+    assert not list((tmp_path / "sim").glob("*"))
+
+
+@pytest.mark.parametrize("command, option, value, words", [
+    ("register", "--sigma", 5, ("--sigma is in mm", "--sigma 0.005")),
+    ("register", "--ball-radius", 1500, ("--ball-radius is in mm", "give 1.5")),
+    ("calibrate", "--sigma", 2, ("--sigma is in mm", "--sigma 0.002"))])
+def test_lengths_in_micrometres_given_as_mm_are_refused(cube, tmp_path, command, option, value, words):
+    out = tmp_path / "asbuilt"
+    extra = ["--out", out] if command == "calibrate" else []
+    assert_bad_input(run(command, cube, cube / "touches.template.csv", option, value, *extra), *words)
+    assert not out.exists()

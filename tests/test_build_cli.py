@@ -126,7 +126,7 @@ def test_cli_build_default_folder_prints_it_and_refuses_to_overwrite(tmp_path):
     assert marker.exists()
     forced = run("build", "quarter-sphere", "--radius", "40", "--force", "--stl-tolerance", "0.05", cwd=tmp_path)
     assert forced.returncode == 0, forced.stderr
-    assert not marker.exists() and (folder / "fixture.step").exists()
+    assert marker.read_text() == "old" and (folder / "fixture.step").exists()  # not fixturecad's: kept
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["quarter-sphere-r40"]
 
 
@@ -254,6 +254,28 @@ def test_an_older_features_json_is_refused_in_one_line(tmp_path):
     document = json.loads((folder / "features.json").read_text())
     (folder / "features.json").write_text(json.dumps({**document, "schema": "fixturecad.features/1"}))
     assert_bad_input(run("simulate", folder, "--trials", 1), "fixturecad.features/1", "rebuild")
+    assert_bad_input(run("register", folder, folder / "touches.template.csv"), "fixturecad.features/1", "rebuild")
+
+
+def test_register_reads_the_folders_features_json(tmp_path):
+    """The cube's top moved up 1 mm in features.json: register's pose moves the part down 1 mm; register.py,
+    run alone, keeps the copy it was built with."""
+    import subprocess
+    import sys
+
+    from cli import run
+
+    folder = build(make("cube", size=10), tmp_path / "cube")
+    document = json.loads((folder / "features.json").read_text())
+    top = next(f for f in document["features"] if f["id"] == "top")
+    top["point"][2] += 1.0
+    (folder / "features.json").write_text(json.dumps(document))
+    touches = folder / "touches.template.csv"
+    moved = json.loads(run("register", folder, touches, "--format", "json").stdout)
+    alone = json.loads(subprocess.run([sys.executable, str(folder / "register.py"), str(touches), "--format", "json"],
+                                      capture_output=True, text=True).stdout)
+    assert moved["translation_mm"] == pytest.approx([0.0, 0.0, -1.0], abs=1e-6)
+    assert alone["translation_mm"] == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)
 
 
 def test_only_the_cad_room_and_template_bodies_import_the_kernel():

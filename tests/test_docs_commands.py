@@ -1,13 +1,12 @@
-"""Every command the README and the docs show runs as written on a fresh build, in order, each file in a
-folder of its own (with the shipped example files)."""
+"""Every command the README and the docs show runs as written, in the order written, README first and then
+every page of docs/, in one folder as a user following them would (with the shipped example files): a page
+does not trip over what an earlier one made."""
 
 import shlex
 import shutil
 import subprocess
 import sys
 from pathlib import Path
-
-import pytest
 
 from cli import run
 
@@ -16,30 +15,33 @@ PAGES = ["README.md"] + sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs")
 
 
 def commands(page):
-    """The ``$ `` lines of a page's console blocks, comments stripped."""
-    lines, inside = [], False
+    """The commands of a page: the ``fixturecad`` steps of its ``bash`` blocks (the install line's build)
+    and the ``$ `` lines of its console blocks, comments stripped, in the order written."""
+    lines, block = [], None
     for line in (ROOT / page).read_text().splitlines():
         if line.startswith("```"):
-            inside = line.strip() == "```console"
-        elif inside and line.startswith("$ "):
+            block = line.strip()[3:] if block is None else None
+        elif block == "console" and line.startswith("$ "):
             lines.append(shlex.split(line[2:], comments=True))
+        elif block == "bash":
+            steps = [shlex.split(step) for step in line.split("&&")]
+            lines += [["fixturecad", *step[1:]] for step in steps if step and step[0].endswith("/fixturecad")]
     return lines
 
 
-@pytest.mark.parametrize("page", [p for p in PAGES if commands(p)])
-def test_the_commands_of_a_page_run(page, tmp_path):
+def test_the_commands_of_every_page_run_in_order(tmp_path):
     shutil.copytree(ROOT / "docs" / "examples", tmp_path / "docs" / "examples")
-    outputs = []
-    for argv in commands(page):
-        if argv[0] == "fixturecad":
-            result = run(*argv[1:], cwd=tmp_path)
-        else:
-            assert argv[0] == "python", argv
-            result = subprocess.run([sys.executable, *argv[1:]], cwd=tmp_path, capture_output=True, text=True)
-        assert result.returncode == 0, (argv, result.stderr)
-        outputs.append(result.stdout)
-    if page == "docs/tolerance.md":
-        # As the page says: the example part's left face is out of the recorded zone.
-        assert any("left" in out and "OUT of the 0.1 mm zone" in out for out in outputs)
-    if page in ("README.md", "docs/fixtures.md"):
-        assert (tmp_path / "out" / "quarter-sphere-r40" / "fixture.step").exists()
+    outputs = {}
+    for page in PAGES:
+        for argv in commands(page):
+            if argv[0] == "fixturecad":
+                result = run(*argv[1:], cwd=tmp_path)
+            else:
+                assert argv[0] == "python", argv
+                result = subprocess.run([sys.executable, *argv[1:]], cwd=tmp_path, capture_output=True, text=True)
+            assert result.returncode == 0, (page, argv, result.stderr)
+            outputs.setdefault(page, []).append(result.stdout)
+    assert commands("README.md")[0][:2] == ["fixturecad", "build"]  # the install line's build comes first
+    # As the tolerance page says: the example part's left face is out of the recorded zone.
+    assert any("left" in out and "OUT of the 0.1 mm zone" in out for out in outputs["docs/tolerance.md"])
+    assert (tmp_path / "out" / "quarter-sphere-r40" / "fixture.step").exists()

@@ -107,7 +107,7 @@ def test_register_command_refuses_bad_touch_files(built, tmp_path, content, word
 
 def test_register_command_needs_a_built_folder(tmp_path):
     (tmp_path / "touches.csv").write_text("feature,x,y,z\n")
-    assert_bad_input(run("register", tmp_path, tmp_path / "touches.csv"), "register.py")
+    assert_bad_input(run("register", tmp_path, tmp_path / "touches.csv"), "no features.json", "fixturecad build")
     assert_bad_input(run("simulate", tmp_path / "missing"), "does not exist")
 
 

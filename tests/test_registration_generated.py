@@ -210,6 +210,7 @@ def test_exit_code_tells_the_status(bare_site, tmp_path):
     from cli import run
 
     write_register_script(features_document("cube"), tmp_path / "register.py")
+    (tmp_path / "features.json").write_text(json.dumps(features_document("cube")))  # what `register` reads
     good = {"top": [[10, 10, 50], [40, 10, 50], [25, 40, 50]], "front": [[10, 0, 10], [40, 0, 10]],
             "left": [[0, 25, 25], [0, 10, 40]]}
     flat = {"top": [[5, 5, 50], [45, 5, 50], [25, 45, 50], [10, 30, 50], [40, 40, 50], [20, 20, 50]]}

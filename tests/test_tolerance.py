@@ -210,3 +210,49 @@ def test_a_feature_beyond_its_tolerance_is_named(name, fid, mode, amount):
     first = result["fixture_flagged"][0]
     assert (first["feature"], first["mode"]) == (fid, mode)
     assert first["departure_mm"] == pytest.approx(amount, rel=0.05)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_rows_whitened_for_the_print_as_the_dense_covariance_says(name):
+    """The low-rank whitening W (W^T W = C^-1, C = I + J_d S J_d^T / sigma^2) against C solved densely."""
+    from fixturecad.registration.deviations import deviation_rows, whitening
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.touches import build_groups
+
+    template, features = nominal(name)
+    tolerance = FixtureTolerance(features, template.DATUMS, 0.1)
+    touches = {}
+    for entry in template.touch_plans()["default"].touches:
+        if "sensor" not in entry:
+            touches.setdefault(entry["feature"], []).extend(np.reshape(entry["points"], (-1, 3)).tolist())
+    problem = Problem(build_groups(features, touches), 0.005, tolerance=tolerance)
+    r, J = problem.sensor_rows(np.eye(3), np.zeros(3))
+    Jd = deviation_rows(problem, tolerance, np.eye(3), np.zeros(3), J)
+    C = np.eye(len(r)) + Jd @ tolerance.covariance @ Jd.T / problem.sigma**2
+    whiten = whitening(tolerance, Jd, problem.sigma)
+    W = whiten(np.eye(len(r)))
+    assert np.allclose(W, W.T) and np.allclose(W.T @ W, np.linalg.inv(C), atol=1e-9)
+    assert np.allclose(whiten(r), W @ r) and np.allclose(whiten(J), W @ J)
+
+
+def test_ten_thousand_touches_on_a_printed_part_take_memory_linear_in_rows():
+    """Evaluating 10,000 rows on a printed part allocates a few MB, not the 800 MB of a dense covariance."""
+    import tracemalloc
+
+    from fixturecad.registration.problem import Problem
+    from fixturecad.registration.touches import build_groups
+
+    template, features = nominal("cube")
+    rng = np.random.default_rng(2)
+    touches = {"top": np.column_stack([rng.uniform(5, 45, (3334, 2)), np.full(3334, 50.0)]),
+               "front": np.column_stack([rng.uniform(5, 45, 3333), np.zeros(3333), rng.uniform(5, 45, 3333)]),
+               "left": np.column_stack([np.zeros(3333), rng.uniform(5, 45, (3333, 2))])}
+    problem = Problem(build_groups(features, touches), 0.005, tolerance=FixtureTolerance(features, template.DATUMS, 0.1))
+    tracemalloc.start()
+    try:
+        r, J = problem.evaluate(np.eye(3), np.zeros(3))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert r.shape == (10_000,) and np.abs(r).max() < 1e-9
+    assert peak < 50e6, peak

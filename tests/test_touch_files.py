@@ -174,3 +174,56 @@ def test_a_gross_outlier_is_reported_with_its_real_distance(built, tmp_path):
     assert abs(result["flagged"][0]["residual_mm"] - 1000.0) < 0.01
     assert result["inadmissible"] == []
     assert np.abs(np.array(result["pose"]) - np.eye(4)).max() < 1e-6
+
+
+# Issue 22: the shipped CSV templates are plans whose touches check each other.
+
+def _template_touches(name):
+    from fixturecad.build import touch_template
+    from fixturecad.registration.deviations import FixtureTolerance
+    from fixturecad.registration.touchfile import read_touch_csv
+    from fixturecad.templates import make
+
+    template = make(name)
+    features = {f.id: f for f in template.features()}
+    touches, _, _ = read_touch_csv(touch_template(template), list(features))
+    return features, touches, FixtureTolerance(features, template.DATUMS, 0.1)
+
+
+@pytest.mark.parametrize("name", ["cube", "inclined-plane-cylinder", "quarter-sphere", "sphere-plate", "v-block"])
+def test_every_template_csv_checks_each_touch(name):
+    from fixturecad.registration.engine import register_touches
+
+    features, touches, tolerance = _template_touches(name)
+    result = register_touches(features, touches, tolerance=tolerance)
+    assert result["status"] == "unique" and result["redundancy"]["rows_beyond_six"] > 0
+    assert result["redundancy"]["unchecked"] == []
+
+
+def test_the_quarter_sphere_csv_finds_a_touch_half_a_millimetre_off():
+    """Each touch in turn moved 0.5 mm off its surface: inconsistent, that touch among at most two flagged
+    (the 7-touch point-probe plan it replaces said "7 touches could each explain it")."""
+    from fixturecad.registration.engine import register_touches
+
+    features, touches, tolerance = _template_touches("quarter-sphere")
+    order = [(fid, k) for fid in touches for k in range(len(touches[fid]))]
+    assert len(order) == 10
+    for index, (fid, k) in enumerate(order):
+        moved = {key: value.copy() for key, value in touches.items()}
+        moved[fid][k] += 0.5 * features[fid].normal_at(moved[fid][k])[0]
+        result = register_touches(features, moved, tolerance=tolerance)
+        flagged = {flag["touch"] for flag in result["flagged"]}
+        assert result["status"] == "inconsistent" and index in flagged and len(flagged) <= 2, (fid, k, flagged)
+
+
+def test_repeated_rows_are_warned_of(built, tmp_path):
+    folder = built("cube")
+    lines = (folder / "touches.template.csv").read_text().splitlines()
+    first = next(k for k, line in enumerate(lines) if line.startswith("top,"))
+    path = tmp_path / "t.csv"
+    path.write_text("\n".join(lines + [lines[first], lines[first]]) + "\n")
+    out = run("register", folder, path)
+    assert out.returncode == 0
+    assert out.stderr == (f"fixturecad: warning: row {len(lines) + 1} of t.csv repeats row {first + 1} of t.csv "
+                          "(and 1 more): a repeated touch checks nothing; touch again elsewhere\n")
+    assert run("register", folder, folder / "touches.template.csv").stderr == ""
