@@ -40,10 +40,11 @@ from .units import UNITS_MM, ball_radius_estimate, check_ball_radius, check_nois
 CSV_COLUMNS = ("feature", "x", "y", "z")
 APPROACH_COLUMNS = ("ax", "ay", "az")
 MIN_ROWS = 6  # constraint rows a rigid pose needs at the very least
-# The most touches a file may hold: ten times a dense scan, a few seconds to read. A JSON file (read whole)
-# may be at most MAX_JSON_BYTES.
-MAX_TOUCH_ROWS = 100_000
-MAX_JSON_BYTES = 100 * MAX_TOUCH_ROWS
+# The most touches a file may hold: the search's memory grows with the touches times its cells (1,998 touches
+# on the cube: 392 MB), far beyond any touch plan. A JSON file (read whole) may be at most
+# MAX_JSON_BYTES.
+MAX_TOUCH_ROWS = 2_000
+MAX_JSON_BYTES = 10 * 10**6
 # Exit code of a registration by its status; 2 is bad input, 6 a search that did not complete (:func:`exit_code`).
 EXIT_CODES = {"unique": 0, "ambiguous": 3, "underdetermined": 4, "inconsistent": 5}
 INCOMPLETE_EXIT = 6
