@@ -191,11 +191,9 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
         R = rotation_from_vector(first_cells()[0])
         boxes = np.array([patch_box(f) for f in surfaces])
         middle = np.mean(np.where(np.isfinite(boxes), boxes, 0.0).mean(axis=1), axis=0)
-        centroid = labels.centroid
         for Rk in R:
-            yk = middle
             pose = np.eye(4)
-            pose[:3, :3], pose[:3, 3] = Rk, centroid - Rk @ yk
+            pose[:3, :3], pose[:3, 3] = Rk, labels.centroid - Rk @ middle
             for _ in range(LOCAL_ROUNDS):
                 assignment = nearest_assignment(features, points, pose, ball_radius_mm)
                 solutions = _solved(problem_of(assignment), assignment, out, initial_pose=pose)
