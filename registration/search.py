@@ -143,12 +143,11 @@ class Tree:
         # (a ball's centre by both radii, its ``rho``; a point probe by the feature's radius).
         core, anchor, direction, offset, boxes = [], [], [], [], []
         for g in groups:
-            c, a, d, radius = g.feature.core()
-            ball = np.ravel(g.sensor.geometry.get("r", 0.0)) if g.ctype.sensor == "S" else 0.0
+            c, a, d, _ = g.feature.core()
             core += [c] * g.count
             anchor += [np.asarray(a, float)] * g.count
             direction += [np.zeros(3) if d is None else np.asarray(d, float)] * g.count
-            offset += list(np.where(g.rho > 0, g.rho, radius + np.broadcast_to(ball, g.rho.shape)))
+            offset += list(contact_offset(g))
             boxes += [patch_box(g.feature)] * g.count
         self.core, self.anchor, self.direction = np.array(core), np.array(anchor), np.array(direction)
         self.offset = np.array(offset, float)
@@ -156,7 +155,7 @@ class Tree:
         self.round = ~self.flat
         # Each touch's patch box, grown by how far a touch that passes may lie off its patch: the patch's
         # tolerance and widening, its distance off the surface, a ball's radius.
-        grow = EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + self.root + self.dev + self.offset
+        grow = patch_growth(self.root, self.dev, self.offset)
         self.low = np.array([box[0] for box in boxes]) - grow[:, None]
         self.high = np.array([box[1] for box in boxes]) + grow[:, None]
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
@@ -462,21 +461,8 @@ class Tree:
         box's half-diagonal on another line core."""
         centre, half = 0.5 * (ylo + yhi), 0.5 * (yhi - ylo)
         rel = (a[:, self.round] - self.anchor[self.round]) @ self.Q + centre[:, None]  # on the box's axes
-        direction = self.direction[self.round] @ self.Q
-        point = self.core[self.round] == "point"
-        aligned = self.aligned[self.round]
-        # A point core (or an aligned line core, across it): the nearest and farthest points of the box.
-        across = np.where(aligned[:, None], [1.0, 1.0, 0.0], 1.0)
-        near_box = np.linalg.norm(across * np.maximum(np.abs(rel) - half[:, None], 0.0), axis=2)
-        far_box = np.linalg.norm(across * (np.abs(rel) + half[:, None]), axis=2)
-        # Another line core: the distance at the box's centre, give or take its half-diagonal.
-        perp = np.linalg.norm(rel - np.einsum("kni,ni->kn", rel, direction)[..., None] * direction, axis=2)
-        diagonal = np.linalg.norm(half, axis=1)[:, None]
-        exact = point | aligned
-        near = np.where(exact, near_box, np.maximum(perp - diagonal, 0.0))
-        far = np.where(exact, far_box, perp + diagonal)
-        r = self.offset[self.round]
-        return np.maximum(np.maximum(near - r, r - far), 0.0)
+        return least_over_box(rel, half[:, None], self.direction[self.round] @ self.Q,
+                              self.core[self.round] == "point", self.aligned[self.round], self.offset[self.round])
 
     def distances(self, a, ys):
         """Distances (K, n) of the touches ``a + y`` from their elements, and their outward directions."""
@@ -639,6 +625,37 @@ class Tree:
             ts = ts + (Rs @ step[:, 3:, None])[..., 0]
             Rs = Rs @ rotation_from_vector(step[:, :3])
         return Rs, ts
+
+
+def contact_offset(group):
+    """How far off its element's core each touch of a point or ball group lies at contact (n,), mm: a ball's
+    centre by both radii (the group's ``rho``), a point probe by the feature's radius."""
+    ball = np.ravel(group.sensor.geometry.get("r", 0.0)) if group.ctype.sensor == "S" else 0.0
+    radius = group.feature.core()[3]
+    return np.where(group.rho > 0, group.rho, radius + np.broadcast_to(ball, group.rho.shape))
+
+
+def patch_growth(root, dev, offset):
+    """How far (mm) a touch that passes may lie off its patch's box: the patch's tolerance and widening, the root
+    of the threshold, its deviation bound, its distance off the surface (a ball's radius)."""
+    return EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + root + dev + offset
+
+
+def least_over_box(rel, half, direction, point, aligned, radius):
+    """The least distance (...) of a sphere or cylinder surface (a point or line core grown by ``radius``) from
+    boxes of places ``rel +- half`` (offsets from the core's anchor, ``(..., 3)``): exact on a point core and on
+    a line core along the boxes' last axis (``aligned``), within the box's half-diagonal on another line core."""
+    # A point core (or an aligned line core, across it): the nearest and farthest points of the box.
+    across = np.where(np.asarray(aligned)[:, None], [1.0, 1.0, 0.0], 1.0)
+    near_box = np.linalg.norm(across * np.maximum(np.abs(rel) - half, 0.0), axis=-1)
+    far_box = np.linalg.norm(across * (np.abs(rel) + half), axis=-1)
+    # Another line core: the distance at the box's centre, give or take its half-diagonal.
+    perp = np.linalg.norm(rel - np.einsum("...i,...i->...", rel, direction)[..., None] * direction, axis=-1)
+    diagonal = np.linalg.norm(half, axis=-1)
+    exact = point | aligned
+    near = np.where(exact, near_box, np.maximum(perp - diagonal, 0.0))
+    far = np.where(exact, far_box, perp + diagonal)
+    return np.maximum(np.maximum(near - radius, radius - far), 0.0)
 
 
 def deviation_bound(tolerance, feature, q):

@@ -40,10 +40,11 @@ from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
-from .search import LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Cells, Tree, beyond_pi, deviation_bound, first_cells, split
+from .search import (LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Cells, Tree, beyond_pi, contact_offset, deviation_bound,
+                     first_cells, least_over_box, patch_growth, split)
 from .solve import Solutions, solve, threshold_mm2, told_apart
 from .touches import point_touches
-from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, same_pose
+from .verdict import EXTENT_TOLERANCE_MM, same_pose
 
 SURFACES = ("plane", "sphere", "cylinder")  # what an unlabelled touch may lie on
 MAX_ASSIGNMENTS = 4  # a cell whose candidates leave at most this many assignments is searched under each
@@ -231,12 +232,10 @@ class Labels:
         for g in groups:
             if g.points is None:
                 continue  # a sensor: not searched (:mod:`.search`)
-            radius = g.feature.core()[3]
-            ball = float(np.ravel(g.sensor.geometry.get("r", 0.0))[0]) if g.ctype.sensor == "S" else 0.0
             places.append(g.points)
             touch += range(count, count + g.count)
             feature += [g.feature] * g.count
-            offset += list(np.where(g.rho > 0, g.rho, radius + ball))
+            offset += list(contact_offset(g))
             count += g.count
         self.labelled = count
         places.append(points)
@@ -279,7 +278,7 @@ class Labels:
             v, w, ylo, yhi, bound, candidate, allowed = self.kept(threshold, v, w, ylo, yhi, allowed,
                                                                    tree_of if joint else None)
             kept.append(len(v))
-            choices = candidate[:, self.unlabelled].reshape(len(v), self.count, F)
+            choices = self.choices(candidate)
             count = choices.sum(axis=2)
             keys = self.keys(candidate)
             whole = np.prod(count.astype(float), axis=1) <= MAX_ASSIGNMENTS
@@ -326,7 +325,7 @@ class Labels:
         if not len(v):
             return v, w, ylo, yhi, np.zeros(0), allowed, allowed
         root = float(np.sqrt(threshold))
-        grow = EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + root + self.dev + self.offset
+        grow = patch_growth(root, self.dev, self.offset)
         low, high = self.box[:, 0] - grow[:, None], self.box[:, 1] + grow[:, None]
         parts = [self.bound(v[k:k + CHUNK], w[k:k + CHUNK], ylo[k:k + CHUNK], yhi[k:k + CHUNK], root, low, high,
                             allowed[k:k + CHUNK]) for k in range(0, len(v), CHUNK)]
@@ -336,7 +335,7 @@ class Labels:
         v, w, ylo, yhi, bound, candidate, allowed, shares = (x[keep] for x in (v, w, ylo, yhi, bound, candidate,
                                                                               allowed, shares))
         if tree_of is not None and len(v):
-            count = candidate[:, self.unlabelled].reshape(len(v), self.count, len(self.surfaces)).sum(axis=2)
+            count = self.choices(candidate).sum(axis=2)
             keys = self.keys(candidate)
             rows, inverse = np.unique(keys, axis=0, return_inverse=True)
             inverse = inverse.ravel()
@@ -354,9 +353,13 @@ class Labels:
             v, w, ylo, yhi, bound, candidate, allowed = (x[keep] for x in (v, w, ylo, yhi, bound, candidate, allowed))
         return v, w, ylo, yhi, bound, candidate, allowed
 
+    def choices(self, candidate):
+        """Each cell's candidates of each unlabelled touch (K, n_unlabelled, surfaces), from the pairs' (K, J)."""
+        return candidate[:, self.unlabelled].reshape(len(candidate), self.count, len(self.surfaces))
+
     def keys(self, candidate):
         """Each cell's unlabelled touches' one candidate (an index into the surfaces, -1: none or several)."""
-        choices = candidate[:, self.unlabelled].reshape(len(candidate), self.count, len(self.surfaces))
+        choices = self.choices(candidate)
         return np.where(choices.sum(axis=2) == 1, np.argmax(choices, axis=2), -1)
 
     def resolve(self, threshold, v, w, ylo, yhi):
@@ -424,14 +427,5 @@ class Labels:
         # A plane: the signed distance's range over the box.
         signed = np.einsum("kji,ji->kj", rel, d) - self.offset
         plane = np.maximum(np.abs(signed) - np.einsum("kji,ji->kj", half, np.abs(d)), 0.0)
-        # A point core: the box's nearest and farthest points; a line core: the distance at the box's centre,
-        # give or take its half-diagonal.
-        near_point = np.linalg.norm(np.maximum(np.abs(rel) - half, 0.0), axis=2)
-        far_point = np.linalg.norm(np.abs(rel) + half, axis=2)
-        perp = np.linalg.norm(rel - np.einsum("kji,ji->kj", rel, d)[..., None] * d, axis=2)
-        diagonal = np.linalg.norm(half, axis=2)
-        point = self.core == "point"
-        near = np.where(point, near_point, np.maximum(perp - diagonal, 0.0))
-        far = np.where(point, far_point, perp + diagonal)
-        round_least = np.maximum(np.maximum(near - self.offset, self.offset - far), 0.0)
+        round_least = least_over_box(rel, half, d, self.core == "point", np.zeros(len(d), bool), self.offset)
         return np.where(self.core == "plane", plane, round_least)
