@@ -80,6 +80,24 @@ def test_a_designed_fixture_builds_and_registers(contact_class, tmp_path):
                          capture_output=True, text=True)
     solutions = [np.array(s["pose"]) for s in json.loads(out.stdout)["solutions"]]
     assert min(np.abs(s - pose).max() for s in solutions) < 1e-3
+    _the_csv_template_checks_each_touch(folder)
+
+
+def _the_csv_template_checks_each_touch(folder):
+    """Issue 22: the design's touches.template.csv (a point probe on the block when the plan needs sensors)
+    registers unique at its nominal pose with every touch checked, and a touch 0.5 mm off is flagged."""
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.touchfile import read_touch_csv
+
+    features = features_from_json(json.loads((folder / "features.json").read_text()))
+    touches, _, _ = read_touch_csv((folder / "touches.template.csv").read_text(), list(features))
+    result = register_touches(features, touches)
+    assert result["status"] == "unique" and result["redundancy"]["unchecked"] == []
+    fid = next(iter(touches))
+    touches[fid][0] += 0.5 * features[fid].normal_at(touches[fid][:1])[0]
+    result = register_touches(features, touches)
+    assert result["status"] == "inconsistent" and 0 in {flag["touch"] for flag in result["flagged"]}
 
 
 @pytest.mark.parametrize("tokens", [["P/F-S/M"] * 6, ["--class", "{S}{S-S}{S-S}{S-S}"]])

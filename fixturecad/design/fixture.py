@@ -65,10 +65,13 @@ class Design(Template):
     def touch_plans(self) -> dict:
         s, t = self.size, self.layout.thickness
         faces = self.layout.face_ids()
+        # Three rim touches on top; three on the front and on the left face at two heights, so that the sides'
+        # touches see the top's tilt and each touch is checked by the others (the CSV template's plan).
+        low, high = -0.75 * t, -0.25 * t
         probe = [
             touch("P/F-PL/M", faces["top"], rim_points(s)),
-            touch("P/F-PL/M", faces["front"], [[-0.4 * s, -s / 2, -t / 2], [0.4 * s, -s / 2, -t / 2]]),
-            touch("P/F-PL/M", faces["left"], [-s / 2, 0, -t / 2]),
+            touch("P/F-PL/M", faces["front"], [[-0.4 * s, -s / 2, low], [0.0, -s / 2, high], [0.4 * s, -s / 2, low]]),
+            touch("P/F-PL/M", faces["left"], [[-s / 2, -0.4 * s, high], [-s / 2, 0.0, low], [-s / 2, 0.4 * s, high]]),
         ]
         tokens = " ".join(self.combination.tokens())
         return {
@@ -76,7 +79,8 @@ class Design(Template):
                             f"{tokens}, each contact touched twice: the second touches pick one of the poses "
                             "the first allow"),
             "minimal": Plan(self.contact_class, self.layout.touches, f"{tokens}: one touch per contact"),
-            "point-probe": Plan("{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}", probe, "a point probe alone: 3-2-1 on the block"),
+            "point-probe": Plan("{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}{S-T2}", probe,
+                                "a point probe alone: 3-3-3 on the block, each touch checked"),
         }
 
     def extras(self) -> dict:
