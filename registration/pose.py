@@ -42,22 +42,23 @@ def rotation_from_vector(omega):
 
 
 def vector_from_rotation(rotation):
-    """The rotation vector (3,) rad of a rotation matrix (inverse of ``rotation_from_vector``)."""
+    """The rotation vector (..., 3) rad of rotation matrices (..., 3, 3) (inverse of ``rotation_from_vector``;
+    its angle at most pi)."""
     R = np.asarray(rotation, dtype=np.float64)
-    angle = rotation_angle(R)
-    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if angle < 1e-8:
-        return 0.5 * axis
-    if np.pi - angle < 1e-3:
-        # Near a half turn: u u^T from the symmetric part, the sign from the skew part.
-        cos = np.cos(angle)
-        outer = (0.5 * (R + R.T) - cos * np.eye(3)) / (1.0 - cos)
-        k = int(np.argmax(np.diag(outer)))
-        u = outer[:, k] / np.sqrt(outer[k, k])
-        if axis @ u < 0:
-            u = -u
-        return angle * u / np.linalg.norm(u)
-    return angle / (2.0 * np.sin(angle)) * axis
+    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    cos = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
+    angle = np.arctan2(0.5 * np.linalg.norm(axis, axis=-1), cos)[..., None]
+    v = axis * np.where(angle < 1e-8, 0.5, angle / (2.0 * np.sin(np.maximum(angle, 1e-8))))
+    # Near a half turn the skew part vanishes: u u^T from the symmetric part, the sign from the skew part.
+    near = (np.pi - angle[..., 0]) < 1e-3
+    if np.any(near):
+        Rn, c = R[near], cos[near][:, None, None]
+        outer = (0.5 * (Rn + np.swapaxes(Rn, -1, -2)) - c * np.eye(3)) / (1.0 - c)
+        k = np.argmax(np.diagonal(outer, axis1=-2, axis2=-1), axis=-1)
+        u = np.take_along_axis(outer, k[:, None, None], axis=-1)[..., 0]
+        u = u * np.where(np.sum(axis[near] * u, axis=-1) < 0, -1.0, 1.0)[:, None]
+        v[near] = angle[near] * u / np.linalg.norm(u, axis=-1, keepdims=True)
+    return v
 
 
 def rotation_angle(rotation):

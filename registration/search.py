@@ -33,7 +33,8 @@ that passes and is dropped; so is a cell in which no ``y`` keeps every touch
 within reach of its patch's box (:func:`.patches.patch_box`) and within the
 slabs that each touch's reach puts ``y`` in (:meth:`Tree.contract`). A cell left is
 split (its rotation box in eight while a turn moves the touches more than its
-``y`` box is wide, else its ``y`` box in two) until its first-order model is
+``y`` box is wide, else its ``y`` box in two), or its rotation box narrowed to
+the model's ellipsoid (:meth:`Tree.narrowed`), until its first-order model is
 close (``LEAF_FRACTION``). The leaves, joined where they touch, are
 *regions*: every pose that passes lies in one. A region's pose is refined
 from its cheapest leaves, and its *extent* (mm, from each leaf's model
@@ -55,13 +56,13 @@ from .deviations import largest_row_variance
 from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
 from .patches import patch_box, patch_points
-from .pose import rotation_from_vector
+from .pose import rotation_from_vector, vector_from_rotation
 from .problem import Problem
 from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM
 
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_FRACTION = 0.25  # a leaf's first-order model is off by at most this much of sqrt(T) (and the deviations) ...
-LEAF_MM = 0.05  # ... or this (mm), the larger, at first; a region whose pose does not pass is split finer
+LEAF_MM = 0.0125  # ... or this (mm), the larger, at first; a region whose pose does not pass is split finer
 MAX_CELLS = 150000  # cells at one level, or leaves in all, beyond which the search stops, not complete
 MAX_LEAVES = 60000
 MAX_LEVELS = 60  # splits of a cell before the search stops, not complete
@@ -70,6 +71,8 @@ REGION_STARTS = 4  # ... this many of them
 RESOLVE_ROUNDS = 3  # times an unsettled region is split finer before the search stops ...
 SETTLED_MM = 0.05  # ... a region being settled when its pose passes and its extent is at most this (mm)
 RANK_ROTATIONS = np.array([[0.0, 0.0, 0.0], [0.9, -0.4, 0.3], [-0.5, 1.1, 0.7]])  # rad
+NARROW_ANGLE = 4.0  # rad: a cell whose rotation vectors are shorter than this is narrowed to its model's ellipsoid ...
+NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
@@ -308,7 +311,7 @@ class Tree:
         c.bound = np.maximum(c.zeroth, c.first)
         # The y of a pose that may pass lies in the model's ellipsoid: the box shrinks to its shadow on the box's
         # axes (the remainders hold over the box it had).
-        W, theta, slack, held = self.ellipsoid(c)
+        c.W, c.theta, c.slack, c.held = W, theta, slack, held = self.ellipsoid(c)
         centre = theta[:, 3:6] @ self.Q
         half = np.sqrt(slack[:, None] * np.einsum("ik,nij,jk->nk", self.Q, W[:, 3:6, 3:6], self.Q))
         c.ylo = np.where(held[:, None], np.maximum(c.ylo, centre - half), c.ylo)
@@ -354,6 +357,29 @@ class Tree:
             new_hi = np.where(g > 0, b, np.where(g < 0, a, np.inf))
             c.ylo = np.maximum(c.ylo, np.max(new_lo, axis=1))
             c.yhi = np.minimum(c.yhi, np.min(new_hi, axis=1))
+
+    def narrowed(self, c):
+        """Which cells' rotation boxes narrow to their model's ellipsoid, and the narrower boxes (v, w).
+
+        A pose of the cell that passes has its turn ``omega`` in the ellipsoid's shadow, within ``r =
+        sqrt(slack lambda_max(W_ww))`` of ``omega*``, and ``|omega| <= delta``. Follow the rotation vector of
+        ``R0 exp(omega)`` from ``v0`` as omega moves: its length moves no faster than omega (along its axis
+        the inverse right Jacobian is 1), so it stays within ``a = |v0| + delta < 2 pi``, and the vector moves at
+        most ``(a/2) / sin(a/2)`` times as fast as omega (that Jacobian's norm). So it lies within that times
+        ``min(r, 2 delta)`` of the vector of ``R0 exp(omega*)`` nearest ``v0``: the box of that half-width about
+        it holds every pose of the cell that passes (with the y box the cell has)."""
+        star = c.theta[:, :3]
+        angle = np.linalg.norm(c.v, axis=1) + c.delta
+        reach = np.sqrt(c.slack * np.linalg.eigvalsh(c.W[:, :3, :3])[:, -1])
+        half = np.minimum(angle, NARROW_ANGLE) / 2.0
+        w = half / np.sin(half) * np.minimum(reach, 2.0 * c.delta)
+        narrow = c.held & (np.linalg.norm(star, axis=1) <= c.delta) & (angle <= NARROW_ANGLE) & (w <= NARROW_GAIN * c.w)
+        v = vector_from_rotation(c.R[narrow] @ rotation_from_vector(star[narrow]))
+        # The same rotation's other vector, past a half turn, where the cell's own vector lies beyond pi.
+        length = np.linalg.norm(v, axis=1, keepdims=True)
+        other = v - 2.0 * np.pi * v / np.maximum(length, 1e-300)
+        far = np.linalg.norm(other - c.v[narrow], axis=1) < np.linalg.norm(v - c.v[narrow], axis=1)
+        return narrow, np.where(far[:, None], other, v), w[narrow]
 
     def first_order(self, c):
         """The touches' rows to first order in the cell's turn ``omega`` (``R = R0 exp(omega)``, ``|omega| <=
@@ -506,7 +532,12 @@ class Tree:
             turning = turn >= shift
             if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS or sum(len(d.v) for d in done) > MAX_LEAVES:
                 return None, f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
-            v, w, ylo, yhi = split(c.v, c.w, c.ylo, c.yhi, turning, self.relevant)
+            # A cell whose model pins its turn down is narrowed to it at once, the rest split.
+            narrow, v_narrow, w_narrow = self.narrowed(c)
+            v, w, ylo, yhi = split(c.v[~narrow], c.w[~narrow], c.ylo[~narrow], c.yhi[~narrow], turning[~narrow],
+                                   self.relevant)
+            v, w = np.concatenate([v, v_narrow]), np.concatenate([w, w_narrow])
+            ylo, yhi = np.concatenate([ylo, c.ylo[narrow]]), np.concatenate([yhi, c.yhi[narrow]])
         return None, f"cells still wider than a leaf after {MAX_LEVELS} levels"
 
     def regions(self, start=None):
@@ -784,10 +815,8 @@ def mahalanobis(R, t, information, Rs, ts):
     spatial twist (rotation vector, translation) that takes (R, t) to each; poses more than a radian away are
     infinitely far."""
     E = Rs @ R.T  # R_k = exp(omega) R
-    cos = np.clip((np.trace(E, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(cos)
-    vee = np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], axis=1)
-    omega = vee * np.where(angle < 1e-9, 0.5, angle / (2.0 * np.sin(np.maximum(angle, 1e-9))))[:, None]
+    omega = vector_from_rotation(E)
     twist = np.hstack([omega, ts - E @ t])  # t_k = exp(omega) t + v
     d = np.einsum("ki,ij,kj->k", twist, information, twist)
-    return np.where(angle < 1.0, d, np.inf)
+    return np.where(np.linalg.norm(omega, axis=1) < 1.0, d, np.inf)
+
