@@ -257,8 +257,12 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
     groups = build_groups(sampler.features, touches, sampler.ball_radius_mm, contacts)
     bound_t, bound_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever, tolerance), truth, noise_model))
     noise_t, noise_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever), truth, noise_model))
+    # Unlabelled: each touch's feature against the one the answer put it on (None: none, or left out).
+    own = [fid for fid, points in touches.items() for _ in range(len(points))]
+    put = {a["touch"] - len(contacts): a["feature"] for a in result.get("assignment") or []}
     return {
         "status": result["status"],
+        **({"assigned": [[fid, put.get(k)] for k, fid in enumerate(own)]} if unlabelled else {}),
         "translation_error_mm": err_t,
         "rotation_error_deg": float(np.degrees(err_r)),
         "crb_translation_mm": bound_t,
@@ -316,6 +320,8 @@ def summarise(records, noise):
         "statuses": statuses,
         "median_time_ms": float(np.median([r["time_s"] for r in records]) * 1e3),
         **_split(records),
+        **({"assigned_own_feature": float(np.mean([own == put for r in records for own, put in r["assigned"]]))}
+           if "assigned" in records[0] else {}),
     }
 
 
@@ -363,8 +369,30 @@ def format_summary(s) -> str:
            f"{s['rms_rotation_error_deg'] / s['noise_crb_rotation_deg']:.2f} x the touch-noise bound "
            f"{s['noise_crb_translation_mm'] * 1e3:.2f} um, {s['noise_crb_rotation_deg'] * 1e3:.3f} mdeg)"]
           if "noise_only_rms_translation_error_mm" in s else []),
+        *([f"unlabelled: {100 * s['assigned_own_feature']:.1f} % of the touches put on the feature they were "
+           "made on"] if s.get("unlabelled") else []),
         f"median registration time: {s['median_time_ms']:.2f} ms",
     ])
+
+
+def _plot_assignment(ax, assigned):
+    """Unlabelled touches: how many made on each feature (rows) the answers put on each feature (columns)."""
+    import numpy as np
+
+    rows = sorted({own for own, _ in assigned})
+    columns = rows + sorted({put for _, put in assigned if put is not None and put not in rows}) + ["none"]
+    counts = np.zeros((len(rows), len(columns)), int)
+    for own, put in assigned:
+        counts[rows.index(own), columns.index("none" if put is None else put)] += 1
+    ax.imshow(counts, cmap="Greens")
+    for (i, j), n in np.ndenumerate(counts):
+        if n:
+            ax.text(j, i, str(n), ha="center", va="center", color="white" if n > counts.max() / 2 else "black")
+    ax.set_xticks(range(len(columns)), columns, rotation=30, ha="right")
+    ax.set_yticks(range(len(rows)), rows)
+    ax.set_xlabel("put on (the answer's assignment)")
+    ax.set_ylabel("made on")
+    ax.set_title("unlabelled touches")
 
 
 def plot_errors(records, summary, path: Path) -> None:
@@ -375,7 +403,8 @@ def plot_errors(records, summary, path: Path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    assigned = [pair for r in records for pair in r.get("assigned", ())]
+    fig, axes = plt.subplots(1, 3 if assigned else 2, figsize=(15, 4.6) if assigned else (10, 4))
     panels = [
         ("translation_error_mm", 1e3, "translation error (um)", "crb_translation_mm", "rms_translation_error_mm"),
         ("rotation_error_deg", 1e3, "rotation error (mdeg)", "crb_rotation_deg", "rms_rotation_error_deg"),
@@ -388,9 +417,12 @@ def plot_errors(records, summary, path: Path) -> None:
         ax.set_xlabel(label)
         ax.set_ylabel("trials")
         ax.legend()
+    if assigned:
+        _plot_assignment(axes[2], assigned)
     part = ("an as-built part" if summary["calibrated"] else "an exact part" if summary["fixture_tolerance_mm"] is None
             else f"parts printed within {summary['fixture_tolerance_mm']:g} mm (the bound counts the print)")
-    fig.suptitle(f"{summary['trials']} trials on {part}, noise {summary['noise_mm']} mm, "
+    fig.suptitle(f"{summary['trials']} trials{' of unlabelled touches' if assigned else ''} on {part}, "
+                 f"noise {summary['noise_mm']} mm, "
                  f"success {100 * summary['success_rate']:.1f} %")
     fig.tight_layout()
     fig.savefig(path, dpi=100)

@@ -129,3 +129,20 @@ def test_a_first_search_that_stops_says_incomplete_and_gives_poses_that_fit():
     assert result["solutions"] and all(s["rms_residual_mm"] < 1e-4 for s in result["solutions"])
     assert all(abs(a["residual_mm"]) < 1e-4 for s in result["solutions"] for a in s["assignment"])
     assert exit_code(result) == 6
+
+
+def test_simulate_unlabelled_counts_the_touches_put_on_their_own_feature(built, tmp_path):
+    """simulate --unlabelled on the v-block (exact part, 2 trials): unique each time, every touch put on the
+    feature it was made on (the summary's share and line), and the plot drawn."""
+    import json
+
+    from cli import run
+
+    out = run("simulate", built("v-block"), "--unlabelled", "--trials", 2, "--fixture-tolerance", 0,
+              "--out", tmp_path / "sim")
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "sim" / "simulation.json").read_text())
+    assert summary["unlabelled"] and summary["statuses"] == {"unique": 2}
+    assert summary["assigned_own_feature"] == 1.0
+    assert "unlabelled: 100.0 % of the touches put on the feature they were made on" in out.stdout
+    assert (tmp_path / "sim" / "simulation.png").stat().st_size > 10_000
