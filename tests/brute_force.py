@@ -15,9 +15,10 @@ on them. A pose is kept when it passes: every touch lies within
 ``EXACT_RMS_MM``) or pass a chi-square test at the touch noise sigma. Kept poses closer than
 ``SAME_ROTATION_RAD`` and ``SAME_TRANSLATION_MM`` are one.
 
-Point touches and the two sensors of the paper's Example One are modelled: a plane sensor lying on a
-plane feature (its normal against the feature's, its known point on the plane and on the patch) and
-a line sensor crossing a line feature (the two lines meet, the crossing on the line's extent).
+Point touches, labelled or not (each then on the feature whose patch lies nearest it), and the two sensors
+of the paper's Example One are modelled: a plane sensor lying on a plane feature (its normal against the
+feature's, its known point on the plane and on the patch) and a line sensor crossing a line feature (the two
+lines meet, the crossing on the line's extent).
 """
 
 from dataclasses import dataclass
@@ -243,6 +244,49 @@ class TouchResiduals:
         return A, b, self.rows(A[None], b[None])[0]
 
 
+class UnlabelledResiduals(TouchResiduals):
+    """Point touches on some plane, sphere or cylinder, not said which: each touch's row is its signed distance
+    from the feature whose patch lies nearest it at the pose (its distance off the surface plus how far beyond
+    the patch its nearest surface point lies), and it must lie on that feature's patch."""
+
+    def __init__(self, features, points):
+        self.candidates = [f for f in features.values() if f.kind in ("plane", "sphere", "cylinder")]
+        points = np.asarray(points, float).reshape(-1, 3)
+        self.centroid_mm = points.mean(0)
+        self.points = points - self.centroid_mm
+        self.groups, self.contacts, self.size = [(None, self.points)], [], len(points)
+
+    def chosen(self, A, b):
+        """Each touch's feature index (k, n), signed distance (k, n) and distance beyond the patch (k, n)."""
+        q = (np.einsum("kij,nj->kni", A, self.points) + b[:, None]).reshape(-1, 3)
+        distance, beyond = [], []
+        for feature in self.candidates:
+            distance.append(feature.signed_distance(q))
+            near = feature.closest_point(q)
+            core, anchor, direction, _ = feature.core()
+            along = (near - anchor) @ direction if core == "line" else None
+            beyond.append(np.maximum(-feature.extent.margin(near, along), 0.0))
+        distance, beyond = np.array(distance), np.array(beyond)  # (features, k n)
+        choice = np.argmin(np.abs(distance) + beyond, axis=0)
+        pick = np.arange(len(choice))
+        shape = (len(A), len(self.points))
+        return (choice.reshape(shape), distance[choice, pick].reshape(shape), beyond[choice, pick].reshape(shape))
+
+    def rows(self, A, b, inside=False):
+        _, distance, beyond = self.chosen(A, b)
+        if inside:
+            return np.hstack([INSIDE_WEIGHT * np.maximum(beyond - INSIDE_TARGET_MM, 0.0), distance])
+        return distance
+
+    def contact_points(self, A, b):
+        choice = self.chosen(A[None], b[None])[0][0]
+        q = self.points @ A.T + b
+        return [(f, q[choice == k]) for k, f in enumerate(self.candidates) if np.any(choice == k)]
+
+    def outside_mm(self, A, b):
+        return self.chosen(A, b)[2]
+
+
 def same(a, b):
     """Whether two ``fixture2meas`` are one pose (the brute force's resolution)."""
     return _same_rotation(a[:3, :3], b[:3, :3]) and np.linalg.norm(a[:3, 3] - b[:3, 3]) < SAME_TRANSLATION_MM
@@ -252,7 +296,8 @@ def _same_rotation(a, b):
     return np.arccos(np.clip(0.5 * (np.trace(a @ b.T) - 1.0), -1.0, 1.0)) < SAME_ROTATION_RAD
 
 
-def admissible_poses(features, touches, contacts=(), sigma_mm=0.0, truth=None, starts=STARTS, seed=0):
+def admissible_poses(features, touches, contacts=(), sigma_mm=0.0, truth=None, starts=STARTS, seed=0,
+                     unlabelled=False):
     """Every admissible pose the brute force finds, best (lowest cost) first (list of :class:`Pose`).
 
     Parameters
@@ -262,8 +307,10 @@ def admissible_poses(features, touches, contacts=(), sigma_mm=0.0, truth=None, s
     contacts : plane or line sensor contacts as :func:`fixturecad.registration.synthetic.plan_touches` makes them
     sigma_mm : float, touch noise (each axis); 0 for noise-free touches
     truth : array-like (4, 4), optional ``fixture2meas`` tried as one more start
+    unlabelled : the touches' labels are not known (:class:`UnlabelledResiduals`; no contacts)
     """
-    problem = TouchResiduals(features, touches, contacts)
+    problem = UnlabelledResiduals(features, np.vstack(list(touches.values()))) if unlabelled else \
+        TouchResiduals(features, touches, contacts)
     rng = np.random.default_rng(seed)
     lower, upper = bounding_box_mm(features)
     A0 = random_rotations(rng, starts)

@@ -109,6 +109,8 @@ class Case:
     draw: object = None
     plan: str = ""
     printed: bool = False  # registered on a printed part: the fixture's recorded tolerance, as register.py does
+    unlabelled: bool = False  # the touches given without their features, to the engine and the brute force
+    symmetric: bool = False  # its poses are images of one another under the fixture's symmetry: none separates them
 
 
 CASES = [
@@ -126,6 +128,11 @@ CASES = [
     Case("Example Two 3+3", "inclined-plane-cylinder", (0.0, SIGMA_MM), _counts({"plane": 3, "cylinder": 3})),
     Case("sphere-plate 2 per ball", "sphere-plate", (0.0, SIGMA_MM), _counts({"ball_1": 2, "ball_2": 2, "ball_3": 2})),
     Case("Example One (paper plan)", "quarter-sphere", (0.0,), plan="paper"),
+    Case("v-block 4-4-4, unlabelled", "v-block", (SIGMA_MM,), _counts({"groove_a": 4, "groove_b": 4, "end": 4}),
+         unlabelled=True),
+    # Its three poses are the images of the corner's symmetry: no touch tells them apart.
+    Case("cube 4-4-4, unlabelled", "cube", (SIGMA_MM,), _counts({"top": 4, "front": 4, "left": 4}),
+         unlabelled=True, symmetric=True),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
@@ -214,19 +221,23 @@ def judge(case, noise_mm, index, timed=False):
     lay = layout(case, noise_mm, index)
     # Noise-free touches are registered at the engine's default sigma, as a user would.
     kwargs = {"contacts": lay.contacts, "tolerance": lay.tolerance, **({"sigma_mm": noise_mm} if noise_mm else {})}
+    given = lay.touches
+    if case.unlabelled:
+        given, kwargs["unlabelled"] = {}, np.vstack(list(lay.touches.values()))
     seconds = {}
     clock = time.process_time()
-    result = register_touches(lay.features, lay.touches, **kwargs)
+    result = register_touches(lay.features, given, **kwargs)
     seconds["engine"] = time.process_time() - clock
     if timed:
         nominal = np.eye(4)
         nominal[:3, :3] = rotations(NOMINAL_TWIST[None, :3])[0] @ lay.truth[:3, :3]
         nominal[:3, 3] = lay.truth[:3, 3] + NOMINAL_TWIST[3:]
         clock = time.process_time()
-        register_touches(lay.features, lay.touches, nominal, **kwargs)
+        register_touches(lay.features, given, nominal, **kwargs)
         seconds["engine, nominal pose"] = time.process_time() - clock
     clock = time.process_time()
-    found = admissible_poses(lay.features, lay.touches, lay.contacts, noise_mm, lay.truth, seed=index)
+    found = admissible_poses(lay.features, lay.touches, lay.contacts, noise_mm, lay.truth, seed=index,
+                             unlabelled=case.unlabelled)
     seconds["brute force"] = time.process_time() - clock
 
     points = np.vstack([patch_points(f) for f in lay.features.values()])
@@ -250,14 +261,15 @@ def judge(case, noise_mm, index, timed=False):
         out.unique_none = not found
     elif status == "ambiguous":
         out.ambiguous_missing = any(not any(close(p.fixture2meas, s) for s in listed) for p in found)
-        out.separating = _separating(lay, result, kwargs, noise_mm, index, close)
+        out.separating = "" if case.symmetric else _separating(lay, given, result, kwargs, noise_mm, index, close)
     elif status == "inconsistent":
         out.false_inconsistent = bool(found)
     return out
 
 
-def _separating(lay, result, kwargs, noise_mm, index, close):
-    """Probe where the separating touch says, on the real part; whether it then gives the true pose."""
+def _separating(lay, given, result, kwargs, noise_mm, index, close):
+    """Probe where the separating touch says, on the real part; whether it then gives the true pose (added,
+    labelled, to the touches ``given``)."""
     touch = result["separating_touch"]
     if touch is None:
         return "missing"
@@ -268,7 +280,7 @@ def _separating(lay, result, kwargs, noise_mm, index, close):
     if not feature.contains(on_part, PATCH_TOLERANCE_MM)[0]:
         return "off the part"
     point = on_part[0] @ R.T + t + np.random.default_rng(index).normal(scale=noise_mm, size=3)
-    touches = {fid: p.copy() for fid, p in lay.touches.items()}
+    touches = {fid: p.copy() for fid, p in given.items()}
     touches[feature.id] = np.vstack([touches.get(feature.id, np.zeros((0, 3))), point])
     again = register_touches(lay.features, touches, **kwargs)
     return "separates" if again["status"] == "unique" and close(again["pose"], lay.truth) else "does not separate"
