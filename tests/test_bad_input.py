@@ -380,7 +380,7 @@ def test_an_interrupted_simulate_says_so_and_writes_nothing(cube, signum, delay)
     process.send_signal(signum)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 128 + signum
-    # Before it: at most the announcement of a long run, which the first trial may make.
+    # Before it: at most the announcement of a long run, made before the first trial.
     *before, last = stderr.splitlines()
     assert last == "fixturecad: interrupted; nothing was written"
     assert all(line.startswith("simulate: about ") for line in before) and len(before) <= 1
