@@ -133,6 +133,9 @@ CASES = [
     # Its three poses are the images of the corner's symmetry: no touch tells them apart.
     Case("cube 4-4-4, unlabelled", "cube", (SIGMA_MM,), _counts({"top": 4, "front": 4, "left": 4}),
          unlabelled=True, symmetric=True),
+    # Its three equal balls on a circle: the poses are the turns that swap them.
+    Case("sphere-plate 4-4-4, unlabelled", "sphere-plate", (SIGMA_MM,),
+         _counts({"ball_1": 4, "ball_2": 4, "ball_3": 4}), unlabelled=True, symmetric=True),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
