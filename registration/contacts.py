@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .elements import CORE_KEYS, LETTERS, core_offset, distance_and_outward, element, perpendicular_basis
+from .elements import CORE_KEYS, LETTERS, core_offset, cross, distance_and_outward, element, perpendicular_basis
 
 
 # Keys of side geometry: points move with their body as points, the rest as directions.
@@ -275,9 +275,9 @@ def _mobile_mobile(rows, A, a, B, b, rho):
         # Unsigned distance between the lines: the sign of a cross product flips
         # when the lines turn past parallel, the distance does not.
         r = g1["p"] - g2["p"]
-        cross = np.cross(g1["d"], g2["d"])
-        sign = np.where(_dot(r, cross) < 0, -1.0, 1.0)[..., None]
-        m = sign * cross
+        across = cross(g1["d"], g2["d"])
+        sign = np.where(_dot(r, across) < 0, -1.0, 1.0)[..., None]
+        m = sign * across
         size = np.linalg.norm(m, axis=-1)[..., None]
         value = _dot(r, m) / size[..., 0]
         g_m = sign * (r - value[..., None] * m / size) / size  # gradient with respect to the cross product
@@ -286,8 +286,8 @@ def _mobile_mobile(rows, A, a, B, b, rho):
             {
                 (l1, "p"): m / size,
                 (l2, "p"): -m / size,
-                (l1, "d"): np.cross(g2["d"], g_m),
-                (l2, "d"): np.cross(g_m, g1["d"]),
+                (l1, "d"): cross(g2["d"], g_m),
+                (l2, "d"): cross(g_m, g1["d"]),
             },
         )
     else:
@@ -308,10 +308,10 @@ def _locus(rows, pl, P, p, ol, O, o, rho):
     rows.add(_dot(n, r) - rho, {(pl, "n"): r, (ol, "p"): n, (pl, "q"): -n})
     if O.kind == "C" and O.fixed:
         # The known contact line of the cylinder faces the plane.
-        h = np.cross(n, d)
+        h = cross(n, d)
         rows.add(
             _dot(o["m"], h),
-            {(ol, "m"): h, (pl, "n"): np.cross(d, o["m"]), (ol, "d"): np.cross(o["m"], n)},
+            {(ol, "m"): h, (pl, "n"): cross(d, o["m"]), (ol, "d"): cross(o["m"], n)},
         )
     if P.fixed:
         # The contact line lies on the known locus line (point o, direction e) of the plane.
@@ -383,10 +383,10 @@ def residuals_and_jacobian(ctype, sensor: Side, fixture: Side, rotation, transla
                 continue
             g = np.broadcast_to(g, (n, 3))
             if key in POINT_KEYS:
-                jacobian[:, row, :3] += np.cross(np.broadcast_to(moved[key], (n, 3)), g)
+                jacobian[:, row, :3] += cross(np.broadcast_to(moved[key], (n, 3)), g)
                 jacobian[:, row, 3:] += g
             else:
-                jacobian[:, row, :3] += np.cross(np.broadcast_to(moved[key], (n, 3)), g)
+                jacobian[:, row, :3] += cross(np.broadcast_to(moved[key], (n, 3)), g)
     return values, jacobian
 
 
@@ -408,7 +408,7 @@ def make_side(kind: str, fixed: bool, **geometry) -> Side:
     if kind == "PL":
         g["t1"], g["t2"] = perpendicular_basis(g["n"])
         if "e" in g:
-            g["f"] = np.cross(g["n"], g["e"])
+            g["f"] = cross(g["n"], g["e"])
     elif "u" in g:
         g["t1"], g["t2"] = perpendicular_basis(g["u"])
     return Side(kind, fixed, g)

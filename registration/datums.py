@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .elements import cross
 from .tolerance import moved
 
 CONSTRUCTIONS = {
@@ -61,7 +62,7 @@ def _frame(x, y, origin):
     y = y - (y @ x) * x
     y = y / np.linalg.norm(y)
     D = np.eye(4)
-    D[:3, :3] = np.column_stack([x, y, np.cross(x, y)])
+    D[:3, :3] = np.column_stack([x, y, cross(x, y)])
     D[:3, 3] = origin
     return D
 
@@ -101,10 +102,10 @@ class DatumScheme:
             d = _axis(axis)
             along = ((plane.point - axis.point) @ plane.normal) / (d @ plane.normal)
             origin = axis.point + along * d
-            y = np.cross(plane.normal, d)
-            return _frame(np.cross(y, d), y, origin)
+            y = cross(plane.normal, d)
+            return _frame(cross(y, d), y, origin)
         if self.construction == "planes-point":
-            line = np.cross(f[0].normal, f[1].normal)
+            line = cross(f[0].normal, f[1].normal)
             on_line = _meet([f[0].normal, f[1].normal, line], [f[0].point, f[1].point, _centre(f[2])])
             return _frame(f[0].normal, f[1].normal, on_line)
         c = [_centre(g) for g in f]

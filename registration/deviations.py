@@ -16,6 +16,7 @@ inlined into the generated standalone ``register.py``.
 import numpy as np
 
 from .datums import frame_change
+from .elements import cross
 from .pose import motion_from_twist, vector_from_rotation
 from .tolerance import coordinates, deviated, modes, moved, random_coordinates
 
@@ -155,7 +156,7 @@ class FixtureTolerance:
         """
         twists = self.modes[fid].twists
         w = twists[:, :3] @ rotation.T
-        v = twists[:, 3:] @ rotation.T + np.cross(translation, w)
+        v = twists[:, 3:] @ rotation.T + cross(translation, w)
         return np.hstack([w, v])
 
 
@@ -261,7 +262,7 @@ def largest_row_variance(tolerance, feature, points):
     S = tolerance.covariance[s, s]
     points = np.asarray(points, float).reshape(-1, 3)
     # Each mode moves the surface point p by omega x p + v, or a radius mode along the outward normal.
-    moved = np.cross(m.twists[None, :, :3], points[:, None]) + m.twists[None, :, 3:]
+    moved = cross(m.twists[None, :, :3], points[:, None]) + m.twists[None, :, 3:]
     normal = feature.normal_at(points)
     moved[:, m.radius] = normal[:, None]
     core, _, direction, radius = feature.core()

@@ -92,13 +92,21 @@ def element(name: str) -> Element:
                          f"or {', '.join(KINDS)}") from None
 
 
+def cross(a, b):
+    """The cross product of vectors along the last axis, broadcast: ``np.cross`` without its axis handling,
+    which costs more than the product on the small arrays of the search."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
 def perpendicular_basis(v):
     """Two unit vectors perpendicular to unit ``v`` and to each other, shape like ``v``."""
     v = np.asarray(v, dtype=float)
     helper = np.where(np.abs(v[..., :1]) < 0.9, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
-    e1 = np.cross(v, helper)
+    e1 = cross(v, helper)
     e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
-    return e1, np.cross(v, e1)
+    return e1, cross(v, e1)
 
 
 def core_offset(core: str, anchor, direction, points):

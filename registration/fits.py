@@ -6,6 +6,8 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
+from .elements import cross
+
 def plane_normal(points):
     """Closed form: unit normal of the plane through points (n >= 3), or None if collinear."""
     centred = points - points.mean(axis=0)
@@ -25,12 +27,12 @@ def sphere_centres(points, radius):
         if rank == 4:
             return [sol[:3]]
     a, b, c = points[:3]
-    n = np.cross(b - a, c - a)
+    n = cross(b - a, c - a)
     if np.linalg.norm(n) < 1e-9:
         return []
     # Circumcentre of the three points, then up and down the normal to the radius.
     ab, ac = b - a, c - a
-    centre = a + (np.cross(n, ab) * (ac @ ac) + np.cross(ac, n) * (ab @ ab)) / (2.0 * (n @ n))
+    centre = a + (cross(n, ab) * (ac @ ac) + cross(ac, n) * (ab @ ab)) / (2.0 * (n @ n))
     rc = np.linalg.norm(centre - a)
     if rc > radius:
         return [centre]
@@ -56,7 +58,7 @@ def frame_from(normal, axis):
     """Orthonormal frame (3, 3), columns: the normal, the axis made perpendicular to it, their cross."""
     second = axis - (axis @ normal) * normal
     second /= np.linalg.norm(second)
-    return np.column_stack([normal, second, np.cross(normal, second)])
+    return np.column_stack([normal, second, cross(normal, second)])
 
 
 def combinations(lists, limit=16):

@@ -15,7 +15,7 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
-from .elements import CORE_WORDS, element, perpendicular_basis
+from .elements import CORE_WORDS, cross, element, perpendicular_basis
 from .mobility import matrix_rank, null_space, weakest_motion
 
 COLLINEAR_MM = 1e-6  # touches this close to the line through the first and last lie on it
@@ -23,7 +23,7 @@ PARALLEL_COS = 1e-9  # 1 - |cos| below which an axis is parallel to a named dire
 
 
 def _rotation(p, d):
-    return np.concatenate([d, np.cross(p, d)])
+    return np.concatenate([d, cross(p, d)])
 
 
 def _translation(d):
@@ -81,7 +81,7 @@ def screw_words(twist, directions=None) -> str:
     if np.linalg.norm(w) < 1e-9 * max(np.linalg.norm(v), 1e-300):
         return f"translation {{T_u}} {_along(v / np.linalg.norm(v), directions)}"
     pitch = float(w @ v / (w @ w))
-    point = np.cross(w, v) / (w @ w)
+    point = cross(w, v) / (w @ w)
     d = w / np.linalg.norm(w)
     axis = _along(d, directions)
     axis = f"the axis through {_vec(point, 4)} mm {axis}" if axis.startswith("along (") else f"an axis {axis}"
@@ -142,7 +142,7 @@ def free_motions(problem, solution, features=None, weak=False):
         return []
     # Measurement-frame twists (w, v) seen in the fixture frame: (R^T w, R^T (v + w x t)).
     R, t = solution.rotation, solution.translation
-    free = np.hstack([free[:, :3] @ R, (free[:, 3:] + np.cross(free[:, :3], t)) @ R])
+    free = np.hstack([free[:, :3] @ R, (free[:, 3:] + cross(free[:, :3], t)) @ R])
     points, lines, planes, touch_lines = {}, {}, {}, {}
     for g in problem.groups:
         if g.points is not None and g.count >= 2:

@@ -17,7 +17,7 @@ the generated standalone ``register.py``.
 import numpy as np
 
 from .defaults import SENSOR_LEVER_MM
-from .elements import element
+from .elements import cross, element
 
 
 def placement_centre(kind, geometry, contact_point=None):
@@ -53,7 +53,7 @@ def row_whitening(jacobian, centres, lever_mm=SENSOR_LEVER_MM):
     o = np.broadcast_to(centres, (J.shape[0], 3))
     Jw, Jv = J[..., :3], J[..., 3:]
     # J_v skew(o): row j times skew(o) is o x j reversed, i.e. cross(j, o).
-    G = Jw + np.cross(Jv, o[:, None, :])
+    G = Jw + cross(Jv, o[:, None, :])
     C = np.einsum("nki,nli->nkl", G, G) / lever_mm**2 + np.einsum("nki,nli->nkl", Jv, Jv)
     k = C.shape[-1]
     if k == 1:

@@ -11,13 +11,13 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
-from .elements import perpendicular_basis
+from .elements import cross, perpendicular_basis
 
 ORTHONORMAL_TOLERANCE = 1e-6  # largest |R^T R - I| entry accepted in a given 4x4
 
 
 def skew(w):
-    """The cross-product matrix of ``w`` (3,): ``skew(w) @ x == np.cross(w, x)``."""
+    """The cross-product matrix of ``w`` (3,): ``skew(w) @ x == cross(w, x)``."""
     return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
@@ -157,7 +157,7 @@ def rotation_aligning(a, b):
     """A rotation taking unit vector ``a`` onto unit vector ``b`` (the shortest one)."""
     a = np.asarray(a, float) / np.linalg.norm(a)
     b = np.asarray(b, float) / np.linalg.norm(b)
-    axis = np.cross(a, b)
+    axis = cross(a, b)
     s = np.linalg.norm(axis)
     c = float(a @ b)
     if s < 1e-12:

@@ -12,6 +12,8 @@ This module imports numpy only.
 
 import numpy as np
 
+from .elements import cross
+
 CHUNK = 64  # touches tested at once (memory: touches x nearby triangles)
 
 
@@ -49,13 +51,13 @@ def reachable(triangles, points, normals, radius_mm=0.0, clearance_mm=0.0) -> np
 
 def _crossing(o, d, a, e1, e2) -> np.ndarray:
     """Whether each ray o + t d (t > 0) crosses its triangle (a, a + e1, a + e2): Moller-Trumbore."""
-    p = np.cross(d, e2)
+    p = cross(d, e2)
     det = np.einsum("kj,kj->k", e1, p)
     ok = np.abs(det) > 1e-12
     det = np.where(ok, det, 1.0)
     s = o - a
     u = np.einsum("kj,kj->k", s, p) / det
-    q = np.cross(s, e1)
+    q = cross(s, e1)
     v = np.einsum("kj,kj->k", d, q) / det
     t = np.einsum("kj,kj->k", e2, q) / det
     return ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
@@ -69,7 +71,7 @@ def _path_distance(o, d, triangles, length_mm) -> np.ndarray:
     best = np.min([_segments(o, end, p, q) for p, q in edges], axis=0)
     # The start point's foot on the triangle's plane, when it falls inside the triangle.
     a, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
-    n = np.cross(e1, e2)
+    n = cross(e1, e2)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     height = np.einsum("kj,kj->k", o - a, n)
     foot = o - height[:, None] * n - a

@@ -14,7 +14,7 @@ import numpy as np
 from .defaults import SENSOR_LEVER_MM
 from .synthetic import perturb_touches, plan_touches
 from .deviations import entry_on
-from .elements import element
+from .elements import cross, element
 from .features import feature_from_json
 from .tolerance import coordinates, deviated, modes
 from .pose import fixture2meas_from_rt, random_rotation
@@ -40,7 +40,7 @@ def read_triangles(path, volume_mm3=None) -> np.ndarray:
     except (OSError, ValueError):
         raise ValueError(f"{path} is damaged (not readable as STL): rebuild the fixture") from None
     triangles = np.frombuffer(data, STL_RECORD, count, 84)["tri"].astype(np.float64)
-    volume = np.einsum("ij,ij->", triangles[:, 0], np.cross(triangles[:, 1], triangles[:, 2])) / 6.0
+    volume = np.einsum("ij,ij->", triangles[:, 0], cross(triangles[:, 1], triangles[:, 2])) / 6.0
     if not count or (volume_mm3 is not None and not abs(volume - volume_mm3) <= MESH_VOLUME_TOLERANCE * volume_mm3):
         raise ValueError(f"{path} is damaged (not a closed mesh of the fixture's volume): rebuild the fixture")
     return triangles

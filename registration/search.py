@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .elements import distance_and_outward, perpendicular_basis
+from .elements import cross, distance_and_outward, perpendicular_basis
 from .deviations import largest_row_variance
 from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
@@ -244,7 +244,7 @@ class Tree:
         ``omega x p + v`` (a row by minus that along it), a radius mode along the outward direction."""
         twists = self.mode_twists[touch]  # (R, k, 6)
         # u . (omega x p + v) = (p x u) . omega + u . v
-        change = -(np.einsum("kri,rmi->krm", np.cross(x[:, touch], unit), twists[..., :3])
+        change = -(np.einsum("kri,rmi->krm", cross(x[:, touch], unit), twists[..., :3])
                    + np.einsum("kri,rmi->krm", unit, twists[..., 3:]))
         change = np.where(self.mode_radius[touch][None], -1.0, change)
         return change @ self.L
@@ -417,7 +417,7 @@ class Tree:
             remainder2 = remainder2 + np.sum(off**2, axis=1)
         # A round touch whose move may reach its core has no tangent model: the cell is no leaf.
         c.modelled = np.all(usable[..., 0], axis=1) if self.round.any() else np.ones(K, bool)
-        Jw = np.cross(unit, a_rows)  # row j's change with omega: m . (a x omega) = (m x a) . omega
+        Jw = cross(unit, a_rows)  # row j's change with omega: m . (a x omega) = (m x a) . omega
         if self.L is not None:
             # The part's deviations z = L u as unknowns beside y, each u held by a row sigma u (the test is
             # min over z of |r - J_d z|^2 + sigma^2 z^T S^-1 z): the rows' change with u taken at the y box's
@@ -638,7 +638,7 @@ class Tree:
         # sqrt(slack lambda_max(B_i W B_i^T)) + kappa_i of its image at theta*, B_i = [a_i x, I].
         B = np.concatenate([_skew(c.a), np.broadcast_to(np.eye(3), c.a.shape + (3,))], axis=3)  # (K, n, 3, 6)
         spread = np.sqrt(slack[:, None] * np.linalg.eigvalsh(np.einsum("knij,kjl,knml->knim", B, W[:, :6, :6], B))[..., -1])
-        image = c.a + np.cross(c.a, theta[:, None, :3]) + theta[:, None, 3:6]
+        image = c.a + cross(c.a, theta[:, None, :3]) + theta[:, None, 3:6]
         # Where the model leaves a motion free: the cell, every turn within delta and every y in its box.
         whole = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1)[:, None] + c.delta[:, None] * self.rho[None]
         centre = np.where(held[:, None, None], image, c.a + box[:, None])

@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .elements import cross
 from .patches import patch_points, patch_size
 from .pose import motion_from_twist
 
@@ -72,7 +73,7 @@ class Modes:
 
 def _about(axis, point):
     """The unit twist of a rotation about ``axis`` through ``point``."""
-    return np.concatenate([axis, np.cross(point, axis)])
+    return np.concatenate([axis, cross(point, axis)])
 
 
 def _shift(direction):
@@ -164,7 +165,7 @@ def coordinates(mode_set: Modes, actual):
     kind = f.kind
     if kind == "plane":
         offset = ((actual.point - mode_set.centre) @ actual.normal) / (f.normal @ actual.normal)
-        tilts = [actual.normal @ np.cross(t[:3], f.normal) for t in mode_set.twists[1:]]
+        tilts = [actual.normal @ cross(t[:3], f.normal) for t in mode_set.twists[1:]]
         return np.array([offset] + tilts)
     if kind == "sphere":
         return np.concatenate([actual.center - f.center, [actual.radius - f.radius]])
@@ -175,7 +176,7 @@ def coordinates(mode_set: Modes, actual):
     # The printed axis where it crosses the plane normal to the nominal axis through the pivot.
     crossing = actual.point + ((centre - actual.point) @ axis) / (actual_axis @ axis) * actual_axis
     out = [d @ (crossing - centre) for d in directions]
-    out += [actual_axis @ np.cross(t[:3], axis) for t in mode_set.twists[2:4]]
+    out += [actual_axis @ cross(t[:3], axis) for t in mode_set.twists[2:4]]
     if kind == "cylinder":
         out.append(actual.radius - f.radius)
     return np.array(out)
