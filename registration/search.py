@@ -58,7 +58,7 @@ from .mobility import matrix_rank
 from .patches import patch_box, patch_points
 from .pose import rotation_from_vector, vector_from_rotation
 from .problem import Problem
-from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM
+from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
 
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_FRACTION = 0.25  # a leaf's first-order model is off by at most this much of sqrt(T) (and the deviations) ...
@@ -89,6 +89,11 @@ class Regions:
     complete: bool = True
     reason: str = ""
     cells: list = field(default_factory=list)
+
+
+def threshold_mm2(problem):
+    """The residual test's largest cost (mm^2) of a pose at which the rows have rank 6."""
+    return problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
 
 
 def search(problem, threshold):
@@ -273,11 +278,13 @@ class Tree:
         middle = middle @ self.Q
         lo, hi = middle - half, middle + half
         # ... and every round touch within its reach of its element: its core within that of its radius, on the
-        # axes its distance depends on.
+        # axes its distance depends on: every axis for a point core, the first two for a line core along the
+        # last, none for a line core across the box's axes (the touch may lie anywhere along it).
         if self.round.any():
             core_reach = self.offset[None, self.round] + reach[:, self.round]
             core = ((self.anchor[self.round])[None] - c.a[:, self.round]) @ self.Q
-            axes = np.where(self.aligned[self.round, None], [True, True, False], True)[None]
+            point = (self.core[self.round] == "point")[:, None]
+            axes = np.where(point, True, np.where(self.aligned[self.round, None], [True, True, False], False))[None]
             lo[:, self.round] = np.where(axes, np.maximum(lo[:, self.round], core - core_reach[..., None]),
                                          lo[:, self.round])
             hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + core_reach[..., None]),

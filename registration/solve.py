@@ -14,9 +14,9 @@ import numpy as np
 
 from .least_squares import levenberg_marquardt
 from .pose import check_fixture2meas
-from .search import mahalanobis, search
+from .search import mahalanobis, search, threshold_mm2
 from .starts import best_starts, initial_poses
-from .verdict import CHI2_CONFIDENCE, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, chi_square_quantile, judged, same_pose
+from .verdict import EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, judged, same_pose
 
 LOCAL_STARTS = 96  # closed-form starts refined when the search does not complete
 
@@ -35,11 +35,6 @@ class Solutions(list):
     @property
     def complete(self):
         return self.search == "complete"
-
-
-def threshold_mm2(problem):
-    """The residual test's largest cost (mm^2) of a pose at which the rows have rank 6."""
-    return problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
 
 
 def solve(problem, initial_pose=None, complete=True, found=None):

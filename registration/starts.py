@@ -1,10 +1,12 @@
 """Starting poses when no nominal pose is given: closed forms, then sweeps.
 
-A plane and a cylinder by the paper's Example Two steps; three or more sphere
-centres by Kabsch; otherwise a plane's normal (from three touches, or a plane
-sensor) or the line through two sphere centres fixes one direction and a
-sweep about it, with the translation solved by batched Gauss-Newton (or from
-a sphere centre); random rotations when nothing fixes a direction.
+Sensors' given contact points, taken as point touches on their features,
+by the complete search where they fix a pose; a plane and a cylinder by the
+paper's Example Two steps; three or more sphere centres by Kabsch; otherwise
+a plane's normal (from three touches, or a plane sensor) or the line through
+two sphere centres fixes one direction and a sweep about it, with the
+translation solved by batched Gauss-Newton (or from a sphere centre); random
+rotations when nothing fixes a direction.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
@@ -14,9 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .elements import perpendicular_basis
+from .elements import element, perpendicular_basis
 from .fits import combinations, frame_from, kabsch, plane_normal, sphere_centre_candidates
 from .pose import random_rotation, rotation_aligning, rotation_from_vector
+from .problem import Problem
+from .search import search, threshold_mm2
+from .touches import point_touches
 from .verdict import EXTENT_SIGMAS
 
 SWEEP_STEPS = 24  # angles tried about a measured plane normal when no pose is given
@@ -71,6 +76,20 @@ class Starts:
     far: bool = False
 
 
+def located_contact_points(problem, centres):
+    """Sensors whose contact points are given, on planes, spheres and cylinders: each point lies on its
+    feature, so with the point touches they are point touches, and their complete search (:mod:`.search`)
+    finds every pose that puts them there; the sensors' own rows then refine each."""
+    located = [g for g in problem.groups if g.points is None and g.located and element(g.feature.kind).surface]
+    if not located:
+        return None
+    groups = [g for g in problem.groups if g.points is not None]
+    points = Problem(groups + [point_touches(g.feature, g.centre, g.index) for g in located], problem.sigma,
+                     problem.lever, problem.tolerance)
+    poses = search(points, threshold_mm2(points)).poses
+    return Starts(poses, len(poses)) if poses else None
+
+
 def plane_and_cylinder(problem, centres):
     """Closed form: the paper's Example Two steps (:func:`plane_cylinder_starts`)."""
     poses = plane_cylinder_starts(problem)
@@ -119,7 +138,7 @@ def random_rotations(problem, centres):
 
 
 # The start strategies, first that applies wins: one entry per kind of fixture.
-STRATEGIES = (plane_and_cylinder, sweep_about_a_plane_normal, kabsch_on_sphere_centres,
+STRATEGIES = (located_contact_points, plane_and_cylinder, sweep_about_a_plane_normal, kabsch_on_sphere_centres,
               sweep_about_two_sphere_centres, random_rotations)
 
 

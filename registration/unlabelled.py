@@ -41,8 +41,8 @@ from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
 from .search import (LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Cells, Tree, beyond_pi, contact_offset, deviation_bound,
-                     first_cells, least_over_box, patch_growth, split)
-from .solve import Solutions, solve, threshold_mm2, told_apart
+                     first_cells, least_over_box, patch_growth, split, threshold_mm2)
+from .solve import Solutions, solve, told_apart
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
 

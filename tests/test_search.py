@@ -9,12 +9,11 @@ from scipy.sparse.csgraph import connected_components
 
 from fixturecad.build import features_document
 from fixturecad.registration.deviations import largest_row_variance, tolerance_from_document
-from fixturecad.registration.features import features_from_json
+from fixturecad.registration.features import Cylinder, Extent, features_from_json
 from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import Tree, _joined, search
-from fixturecad.registration.solve import threshold_mm2
+from fixturecad.registration.search import Tree, _joined, search, threshold_mm2
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
 
@@ -22,11 +21,17 @@ from test_registration_engine import _plan
 
 # Every element a point or ball touch meets: planes (cube), planes and lines (v-block's edges are not
 # touched, its grooves are planes), a cylinder (inclined plane), spheres (sphere-plate), a sphere, planes
-# and an edge (quarter-sphere); and ball tips on spheres and planes.
+# and an edge (quarter-sphere), cylinders that lean every way (bosses, whose axes no box axis follows); and
+# ball tips on spheres and planes.
 CASES = [("cube", {"top": 2, "front": 2, "left": 2}, 0.0), ("v-block", None, 0.0),
          ("inclined-plane-cylinder", None, 0.0), ("inclined-plane-cylinder", {"plane": 2, "cylinder": 4}, 0.0),
          ("sphere-plate", None, 0.0), ("quarter-sphere", None, 0.0), ("sphere-plate", None, 3.0),
-         ("cube", None, 2.0)]
+         ("cube", None, 2.0), ("bosses", {"boss_a": 4, "boss_b": 4, "boss_c": 4}, 0.0)]
+# Three bosses leaning apart, as a design's are (hand-made: no template has two cylinders).
+BOSSES = {f.id: f for f in (
+    Cylinder("boss_a", (0.0, 0.0, 0.0), np.array([0.3, 0.0, 1.0]) / np.hypot(0.3, 1.0), 6.0, Extent(interval=(0, 30))),
+    Cylinder("boss_b", (40.0, 10.0, 0.0), np.array([-0.2, 0.4, 1.0]) / np.sqrt(1.2), 8.0, Extent(interval=(0, 40))),
+    Cylinder("boss_c", (10.0, 45.0, 0.0), np.array([0.0, -0.5, 1.0]) / np.sqrt(1.25), 5.0, Extent(interval=(0, 25))))}
 IDS = [f"{name}{'' if counts is None else ' ' + '-'.join(map(str, counts.values()))}"
        f"{f' ball {ball:g} mm' if ball else ''}" for name, counts, ball in CASES]
 
@@ -34,7 +39,7 @@ IDS = [f"{name}{'' if counts is None else ' ' + '-'.join(map(str, counts.values(
 def _layout(name, counts, rng, ball=0.0):
     """Touches drawn on the template's patches (every touched feature of the default plan, or ``counts``),
     at a random pose, as ball centres when ``ball`` (mm): (features, touches in the measurement frame, R, t)."""
-    features, plan = _plan(name, "default")
+    features, plan = (BOSSES, []) if name == "bosses" else _plan(name, "default")
     if counts is None:
         counts = {}
         for entry in plan:
@@ -53,6 +58,8 @@ def _problem(name, counts, ball, rng, printed=False):
     features, touches, R, t = _layout(name, counts, rng, ball)
     tolerance = None
     if printed:
+        if name == "bosses":
+            pytest.skip("hand-made features: no printed part")
         document = features_document(make(name))
         tolerance = tolerance_from_document(features_from_json(document), document)
     problem = Problem(build_groups(features, touches, ball), 0.005, tolerance=tolerance)
