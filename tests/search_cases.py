@@ -19,6 +19,7 @@ Poses are compared by the largest displacement of the fixture's patch points (mm
 Cramer-Rao bound at the true pose (the brute force's own Jacobian).
 """
 
+import functools
 import time
 import zlib
 from dataclasses import dataclass, field
@@ -41,14 +42,27 @@ EXACT_TOLERANCE_MM = 0.01  # ... or this far, noise-free
 TRUE_POSE_RANGE_MM = 100.0  # true fixture origins are uniform in this cube about the measurement origin
 NOMINAL_TWIST = np.concatenate([np.radians(5.0) * np.array([0.6, 0.0, 0.8]), [3.0, 4.0, 0.0]])  # rad, mm
 DISPLACEMENT_POINTS = 400  # patch points over which two poses are compared
+BOSSES = "{C-R-C}" * 6  # a design of six bosses (line sensors in its plan; touched here by a point probe)
+
+
+@functools.lru_cache(maxsize=None)
+def _fixture(name):
+    """A template by name, or the design of a Table V class written as its members ("{C-R-C}...")."""
+    if name.startswith("{"):
+        from fixturecad.design.combination import for_class
+        from fixturecad.design.fixture import design
+        from fixturecad.fixture_commands import table_five_class
+
+        return design(for_class(table_five_class(name)))
+    return make(name)
 
 
 def _features(template):
-    return features_from_json(features_document(make(template)))
+    return features_from_json(features_document(_fixture(template)))
 
 
 def _tolerance(template, features):
-    return tolerance_from_document(features, features_document(make(template)))
+    return tolerance_from_document(features, features_document(_fixture(template)))
 
 
 def _on_patch(features, counts, rng):
@@ -136,6 +150,9 @@ CASES = [
     # Its three equal balls on a circle: the poses are the turns that swap them.
     Case("sphere-plate 4-4-4, unlabelled", "sphere-plate", (SIGMA_MM,),
          _counts({"ball_1": 4, "ball_2": 4, "ball_3": 4}), unlabelled=True, symmetric=True),
+    # Six bosses leaning every way, touched by a point probe: no box axis follows their axes.
+    Case("{C-R-C}x6 design's bosses 2 each", BOSSES, (0.0, SIGMA_MM),
+         _counts({f"boss_{k}": 2 for k in range(1, 7)})),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
@@ -167,7 +184,7 @@ def layout(case, noise_mm, index):
     truth[:3, :3] = random_rotations(rng, 1)[0]
     truth[:3, 3] = rng.uniform(-TRUE_POSE_RANGE_MM, TRUE_POSE_RANGE_MM, 3)
     if case.plan:
-        touches, contacts = plan_touches(make(case.template).touch_plans()[case.plan].touches, truth)
+        touches, contacts = plan_touches(_fixture(case.template).touch_plans()[case.plan].touches, truth)
     else:
         touches, contacts = {fid: p @ truth[:3, :3].T + truth[:3, 3] for fid, p in case.draw(features, rng).items()}, []
     touches = {fid: p + rng.normal(scale=noise_mm, size=p.shape) for fid, p in touches.items()}
