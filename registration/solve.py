@@ -72,6 +72,9 @@ def solve(problem, initial_pose=None, complete=True, found=None):
             solution.wide = reach[-1] > EXTENT_WIDENING_MAX_MM
         solutions.append(solution)
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
+    if solutions.complete and not extents and any(s.passes and s.admissible and s.rank == 6 for s in solutions):
+        # The search left no region, yet a start's pose passes: the search missed it, and may have missed more.
+        solutions.search, solutions.reason = "incomplete", "a pose passes that the search did not find"
     if solutions.complete:
         solutions.extent_mm = max(reach, default=0.0)
         if any(g.points is None for g in problem.groups) and any(s.wide for s in solutions):

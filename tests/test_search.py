@@ -285,3 +285,19 @@ def test_a_search_that_did_not_complete_claims_nothing():
     assert exit_code(result) == 6
     assert exit_code({**result, "status": "underdetermined"}) == 4
     assert exit_code({**result, "status": "unique", "search": "complete"}) == 0
+
+
+def test_a_pose_the_search_did_not_find_makes_it_incomplete(monkeypatch):
+    """A search that leaves no region although the starts then find a pose that passes has missed it (and may
+    have missed others): the result says so and exits 6, not `unique` with exit 0."""
+    from fixturecad.registration import solve
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.search import Regions
+    from fixturecad.registration.touchfile import exit_code
+
+    features, touches, _, _ = _layout("cube", None, np.random.default_rng(4))
+    assert register_touches(features, touches)["search"] == "complete"
+    monkeypatch.setattr(solve, "search", lambda problem, threshold: Regions())
+    result = register_touches(features, touches)
+    assert result["status"] == "unique" and result["search"] == "incomplete"
+    assert "did not find" in result["search_reason"] and exit_code(result) == 6
