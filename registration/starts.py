@@ -80,7 +80,9 @@ def located_contact_points(problem, centres):
     """Sensors whose contact points are given, on planes, spheres and cylinders: each point lies on its
     feature, so with the point touches they are point touches, and their complete search (:mod:`.search`)
     finds every pose that puts them there; the sensors' own rows then refine each."""
-    located = [g for g in problem.groups if g.points is None and g.located and element(g.feature.kind).surface]
+    # (A ball sensor's centre is its contact point only when that is given as ``o``.)
+    located = [g for g in problem.groups if g.points is None and g.located and element(g.feature.kind).surface
+               and not (g.ctype.sensor == "S" and "o" not in g.sensor.geometry)]
     if not located:
         return None
     groups = [g for g in problem.groups if g.points is not None]
