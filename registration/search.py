@@ -1,7 +1,9 @@
 """Every pose the touches admit: a branch and bound over rotations and translations.
 
 A pose *passes* when its cost (the sum of its squared rows) is at most
-``T = sigma^2 q``, q the residual test's chi-square quantile. Write each point
+``T = sigma^2 q``, q the residual test's chi-square quantile. Sensor touches
+enter as the point touches that stand in for them (:mod:`.stand_ins`), with
+``T`` divided by their factor. Write each point
 or ball touch's place on the fixture as ``x_i = R^T b_i + y``, ``b_i = p_i - c``
 (``c`` the touches' measured centroid, ``y`` its image on the fixture). A
 touch's rows measure the distance ``d_i(x_i)`` of ``x_i`` from its element (a
@@ -58,6 +60,7 @@ from .mobility import matrix_rank
 from .patches import patch_box, patch_points
 from .pose import rotation_from_vector, vector_from_rotation
 from .problem import Problem
+from .stand_ins import stand_ins
 from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
 
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
@@ -89,6 +92,7 @@ class Regions:
     complete: bool = True
     reason: str = ""
     cells: list = field(default_factory=list)
+    left: int = 0
 
 
 def threshold_mm2(problem):
@@ -97,13 +101,18 @@ def threshold_mm2(problem):
 
 
 def search(problem, threshold):
-    """Every region of poses of the problem's point and ball touches that may pass ``threshold`` (cost,
-    mm^2; on a printed part, ``problem.tolerance``, with the part's deviations): :class:`Regions`. Not
-    complete when the touches' rows cannot fix a pose."""
-    tree = Tree(problem, threshold)
+    """Every region of poses that may pass ``threshold`` (cost, mm^2; on a printed part,
+    ``problem.tolerance``, with the part's deviations) on the point and ball touches and the sensors' stand-ins
+    (:mod:`.stand_ins`): :class:`Regions`, ``left`` the sensor touches left out. Not complete when those
+    rows cannot fix a pose."""
+    groups, kappa2, left = stand_ins(problem, threshold)
+    tree = Tree(Problem(groups, problem.sigma, problem.lever, problem.tolerance), threshold / kappa2)
     if not tree.fixes_pose:
-        return Regions(complete=False, reason="the point and ball touches do not fix a pose")
-    return tree.regions()
+        return Regions(complete=False, reason="the point and ball touches and the sensors' stand-ins do not fix a pose",
+                       left=left)
+    found = tree.regions()
+    found.left = left
+    return found
 
 
 def first_cells():

@@ -77,12 +77,12 @@ def solve(problem, initial_pose=None, complete=True, found=None):
         solutions.search, solutions.reason = "incomplete", "a pose passes that the search did not find"
     if solutions.complete:
         solutions.extent_mm = max(reach, default=0.0)
-        if any(g.points is None for g in problem.groups) and any(s.wide for s in solutions):
-            # The region is the point touches' alone: the sensors' rows may fix the pose within it, or leave two
-            # poses there; the search cannot tell which, so it claims neither (exit 6, not underdetermined).
+        if found.left and any(s.wide for s in solutions):
+            # The region leaves out some sensors' rows: they may fix the pose within it, or leave two poses
+            # there; the search cannot tell which, so it claims neither (exit 6, not underdetermined).
             solutions.search = "incomplete"
-            solutions.reason = (f"the sensors are not searched, and the point touches alone leave a region "
-                                f"{solutions.extent_mm:.2f} mm wide")
+            solutions.reason = (f"{found.left} sensor touch{'es' if found.left > 1 else ''} not searched, and the "
+                                f"rest leave a region {solutions.extent_mm:.2f} mm wide")
             for s in solutions:
                 s.wide = False
     return told_apart(solutions, problem.sigma)
