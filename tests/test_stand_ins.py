@@ -16,7 +16,7 @@ from fixturecad.registration.stand_ins import stand_in
 from fixturecad.registration.touches import contact_touch, laid_sensor, point_touches
 
 THRESHOLD_MM2 = 0.05**2 * 20  # a passing cost: sigma 0.05 mm, 20 degrees of freedom
-POSES = 120  # poses per contact's placement (two placements), at turns from 1 mrad to 1 rad and shifts from 10 um to 10 mm
+POSES = 120  # poses per placement of a contact (two placements), turned 1 mrad to 1 rad and shifted 10 um to 10 mm
 BALL_MM = 4.0
 
 
