@@ -60,7 +60,7 @@ from .mobility import matrix_rank
 from .patches import patch_box, patch_points
 from .pose import rotation_from_vector, vector_from_rotation
 from .problem import Problem
-from .stand_ins import stand_ins
+from .stand_ins import deviation_bound_mm, stand_ins
 from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
 
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
@@ -69,6 +69,7 @@ LEAF_MM = 0.0125  # ... or this (mm), the larger, at first; a region whose pose 
 MAX_CELLS = 150000  # cells at one level, or leaves in all, beyond which the search stops, not complete
 MAX_LEAVES = 60000
 MAX_LEVELS = 60  # splits of a cell before the search stops, not complete
+PARTIAL_CELLS = 50000  # cells kept in all before a search that leaves sensors' rows out stops, not complete
 REFINE_STEPS = 4  # batched Gauss-Newton steps from each region's cheapest leaves (near its model's least) ...
 REGION_STARTS = 4  # ... this many of them
 RESOLVE_ROUNDS = 3  # times an unsettled region is split finer before the search stops ...
@@ -103,16 +104,23 @@ def threshold_mm2(problem):
 def search(problem, threshold):
     """Every region of poses that may pass ``threshold`` (cost, mm^2; on a printed part,
     ``problem.tolerance``, with the part's deviations) on the point and ball touches and the sensors' stand-ins
-    (:mod:`.stand_ins`): :class:`Regions`, ``left`` the sensor touches left out. Not complete when those
+    (:mod:`.stand_ins`): :class:`Regions`, ``left`` the sensor touches not searched in full. Not complete when those
     rows cannot fix a pose."""
-    groups, kappa2, left = stand_ins(problem, threshold)
-    tree = Tree(Problem(groups, problem.sigma, problem.lever, problem.tolerance), threshold / kappa2)
+    tree, left = stand_in_tree(problem, threshold)
     if not tree.fixes_pose:
         return Regions(complete=False, reason="the point and ball touches and the sensors' stand-ins do not fix a pose",
                        left=left)
-    found = tree.regions()
+    found = tree.regions(partial=left > 0)
     found.left = left
     return found
+
+
+def stand_in_tree(problem, threshold):
+    """The :class:`Tree` over the problem's point and ball touches and its sensors' stand-ins, the threshold
+    divided by their factor (:mod:`.stand_ins`), and the number of sensor touches left out."""
+    groups, kappa2, left, found = stand_ins(problem, threshold)
+    problem = Problem(groups, problem.sigma, problem.lever, problem.tolerance)
+    return Tree(problem, threshold / kappa2, None, found), left
 
 
 def first_cells():
@@ -133,12 +141,16 @@ def beyond_pi(v, w):
 
 class Tree:
     """The branch and bound of the module doc over one problem's point and ball touches (``centroid``: the
-    point whose image is y, by default theirs)."""
+    point whose image is y, by default theirs); the last groups, one touch each, may be sensors' stand-ins
+    (:class:`.stand_ins.StandIn`)."""
 
-    def __init__(self, problem, threshold, centroid=None):
+    def __init__(self, problem, threshold, centroid=None, stand_ins=()):
         groups = [g for g in problem.groups if g.points is not None]
         self.problem = Problem(groups, problem.sigma, problem.lever)
-        self.judge = Problem(groups, problem.sigma, problem.lever, problem.tolerance)  # the test, deviations and all
+        # The test, deviations and all; with stand-ins off their sensors' features on a printed part only what
+        # must pass is known of it (their features have no modes of their own).
+        printed_stand_ins = problem.tolerance is not None and not all(one.own for one in stand_ins)
+        self.judge = None if printed_stand_ins else Problem(groups, problem.sigma, problem.lever, problem.tolerance)
         self.root = float(np.sqrt(threshold))
         if not groups:
             self.fixes_pose = False
@@ -155,7 +167,7 @@ class Tree:
                                           self.problem.scale()) == 6 for R in rotation_from_vector(RANK_ROTATIONS))
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
-        self.modes(groups, problem.tolerance, threshold / problem.sigma**2)
+        self.modes(groups, problem.tolerance, threshold / problem.sigma**2, stand_ins)
         # Each touch's element: its core, anchor, direction and how far off the core the touch lies at contact
         # (a ball's centre by both radii, its ``rho``; a point probe by the feature's radius).
         core, anchor, direction, offset, boxes = [], [], [], [], []
@@ -220,16 +232,21 @@ class Tree:
         if self.round.any() and self.aligned[self.round].all():
             self.relevant[2] = False
 
-    def modes(self, groups, tolerance, q):
+    def modes(self, groups, tolerance, q, stand_ins):
         """A printed part's deviation modes, as the first-order model carries them: ``L`` (k, k') with
         ``L L^T`` the touched features' mode covariance S; each touch's modes' twists (n, k, 6) and radius
-        flags (n, k); each touch's deviation bound ``dev`` (mm, :func:`deviation_bound`) and ``tilt`` = the largest turn (rad) of its
-        feature that a pose that passes allows, ``sqrt(q lambda_max)`` of its turn's covariance."""
+        flags (n, k); each touch's deviation bound ``dev`` (mm, :func:`deviation_bound`) and ``tilt`` = the
+        largest turn (rad) of its feature that a pose that passes allows, ``sqrt(q lambda_max)`` of its turn's
+        covariance. A sensor's stand-in takes its sensor's feature's modes, its deviation bound from
+        :func:`.stand_ins.deviation_bound_mm`, and a radius mode moves its element by ``radius_move`` (fixture
+        frame) or the turned ``radius_sensor`` (measurement frame), its size within ``radius_dev`` (mm)."""
         n = sum(g.count for g in groups)
         self.dev, self.tilt, self.L = np.zeros(n), np.zeros(n), None
         if tolerance is None:
             return
-        fids = list(dict.fromkeys(g.feature.id for g in groups))
+        links = [None] * (len(groups) - len(stand_ins)) + [None if one.own else one for one in stand_ins]
+        sources = [g.feature if link is None else link.source for g, link in zip(groups, links)]
+        fids = list(dict.fromkeys(f.id for f in sources))
         index = np.concatenate([np.arange(tolerance.slices[f].start, tolerance.slices[f].stop) for f in fids])
         S = tolerance.covariance[np.ix_(index, index)]
         h, E = np.linalg.eigh(S)
@@ -237,30 +254,42 @@ class Tree:
         self.L = E[:, keep] * np.sqrt(h[keep])
         self.mode_twists = np.zeros((n, len(index), 6))
         self.mode_radius = np.zeros((n, len(index)), bool)
+        self.radius_own = np.ones(n, bool)
+        self.radius_move, self.radius_sensor, self.radius_dev = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
         sizes = [tolerance.slices[f].stop - tolerance.slices[f].start for f in fids]
         start = dict(zip(fids, np.cumsum([0] + sizes[:-1])))
         first = 0
-        for g in groups:
-            f, m = g.feature.id, tolerance.modes[g.feature.id]
+        for g, source, link in zip(groups, sources, links):
+            f, m = source.id, tolerance.modes[source.id]
             columns = slice(start[f], start[f] + len(m.names))
             rows = slice(first, first + g.count)
             self.mode_twists[rows, columns] = m.twists
             self.mode_radius[rows, columns] = m.radius
-            self.dev[rows] = deviation_bound(tolerance, g.feature, q)
-            turn = m.twists[:, :3]
             s = tolerance.covariance[tolerance.slices[f], tolerance.slices[f]]
+            if link is None:
+                self.dev[rows] = deviation_bound(tolerance, source, q)
+            else:
+                self.dev[rows] = deviation_bound_mm(tolerance, source, link.places, q)
+                self.radius_own[rows] = False
+                self.radius_move[rows], self.radius_sensor[rows] = link.move, link.sensor_move
+                radius = m.radius.astype(float)
+                self.radius_dev[rows] = np.sqrt(q * max(radius @ s @ radius, 0.0)) * np.linalg.norm(link.sensor_move)
+            turn = m.twists[:, :3]
             self.tilt[rows] = np.sqrt(q * max(np.linalg.eigvalsh(turn.T @ s @ turn)[-1], 0.0))
             first += g.count
 
-    def deviation_rows(self, unit, touch, x):
-        """How each row (unit directions (K, R, 3) of touches ``touch`` (R,) at fixture places x (K, n, 3)) moves
-        with the modes' coordinates u (``z = L u``): (K, R, k'). A mode moves its feature's surface by
-        ``omega x p + v`` (a row by minus that along it), a radius mode along the outward direction."""
+    def deviation_rows(self, unit, touch, x, R):
+        """How each row (unit directions (K, R, 3) of touches ``touch`` (R,) at fixture places x (K, n, 3), the
+        cells' rotations R (K, 3, 3)) moves with the modes' coordinates u (``z = L u``): (K, R, k'). A mode moves
+        its feature's surface by ``omega x p + v`` (a row by minus that along it), a radius mode along the outward
+        direction (a stand-in's element by its ``radius_move``, or its sensor's turned by R)."""
         twists = self.mode_twists[touch]  # (R, k, 6)
         # u . (omega x p + v) = (p x u) . omega + u . v
         change = -(np.einsum("kri,rmi->krm", cross(x[:, touch], unit), twists[..., :3])
                    + np.einsum("kri,rmi->krm", unit, twists[..., 3:]))
-        change = np.where(self.mode_radius[touch][None], -1.0, change)
+        move = self.radius_move[touch][None] + np.einsum("kji,rj->kri", R, self.radius_sensor[touch])
+        radius = np.where(self.radius_own[touch][None], -1.0, -np.einsum("kri,kri->kr", unit, move))
+        change = np.where(self.mode_radius[touch][None], radius[..., None], change)
         return change @ self.L
 
     # --- the bounds ----------------------------------------------------------------------------------------
@@ -448,8 +477,10 @@ class Tree:
                 rounds = slice(len(self.row_touch), None)
                 off_dev[:, rounds] += np.where(usable[..., 0], move / np.maximum(core_gap, 1e-300), np.inf) \
                     * self.dev[self.round]
+            # A stand-in's radius mode along its sensor's normal turns with the cell: off by delta times its size.
+            off_dev += c.delta[:, None] * self.radius_dev[touch]
             remainder2 = remainder2 + np.sum(off_dev**2, axis=1)
-            Jz = self.deviation_rows(unit, touch, c.a + centre[:, None])
+            Jz = self.deviation_rows(unit, touch, c.a + centre[:, None], c.R)
             k = self.L.shape[1]
             prior = np.broadcast_to(np.hstack([np.zeros((k, 3)), self.problem.sigma * np.eye(k)]), (K, k, 3 + k))
             unit = np.concatenate([np.concatenate([unit, -Jz], axis=2), prior], axis=1)
@@ -525,10 +556,10 @@ class Tree:
 
     # --- the search ----------------------------------------------------------------------------------------
 
-    def leaves(self, v, w, ylo, yhi, fraction, kept):
+    def leaves(self, v, w, ylo, yhi, fraction, kept, budget=None):
         """The leaf cells (:class:`Cells`) grown from the given cells: split until their model's remainder is at
         most ``fraction sqrt(T)``; the cells kept per level are added to ``kept``. None when the search stops
-        (past ``MAX_CELLS`` or ``MAX_LEVELS``), with the reason."""
+        (past ``MAX_CELLS`` or ``MAX_LEVELS``, or more than ``budget`` cells kept in all), with the reason."""
         done = []
         for _ in range(MAX_LEVELS):
             # The cheap zeroth-order bound first; the first-order model only for the cells it keeps.
@@ -536,6 +567,8 @@ class Tree:
             c = self.first_bound(c.take((c.zeroth <= self.root**2) & ~beyond_pi(c.v, c.w)))
             c = c.take(c.bound <= self.root**2)
             kept.append(len(c.v))
+            if budget is not None and sum(kept) > budget:
+                return None, f"more than {budget} cells with sensors' rows left out: the rest leave the pose weak"
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
             done.append(c.take(leaf))
             c = c.take(~leaf)
@@ -556,12 +589,15 @@ class Tree:
             ylo, yhi = np.concatenate([ylo, c.ylo[narrow]]), np.concatenate([yhi, c.yhi[narrow]])
         return None, f"cells still wider than a leaf after {MAX_LEVELS} levels"
 
-    def regions(self, start=None):
+    def regions(self, start=None, partial=False):
         """:class:`Regions` over the cells ``start`` (v, w, ylo, yhi; the y boxes on the fixture frame's axes),
-        or over every rotation and image."""
+        or over every rotation and image. ``partial``: sensors' rows are left out, which may narrow what the rows
+        searched leave wide: a region whose pose passes is settled however wide (splitting it finer would not
+        narrow it), and the search stops past ``PARTIAL_CELLS`` cells (the rows searched leave the pose weak)."""
         kept = []
         start = first_cells() if start is None else (start[0], start[1], *self.turned(start[2], start[3], self.Q))
-        leaves, reason = self.leaves(*start, LEAF_FRACTION, kept)
+        budget = PARTIAL_CELLS if partial else None
+        leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget)
         if leaves is None:
             return Regions(complete=False, reason=reason, cells=kept)
         fraction = LEAF_FRACTION
@@ -574,14 +610,14 @@ class Tree:
             # the cost moves by at most sqrt(n) times the largest move of a touch.
             found = [r for r in found if np.sqrt(r.cost) - np.sqrt(len(self.rho)) * r.extent_mm <= self.root]
             unsettled = [k for k, region in enumerate(found)
-                         if not region.passes or (region.extent_mm > SETTLED_MM and not fine)]
+                         if not region.passes or (region.extent_mm > SETTLED_MM and not fine and not partial)]
             if not unsettled:
                 return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept)
             fraction /= 4.0
             members = np.concatenate([found[k].members for k in unsettled])
             settled = leaves.take(~np.isin(np.arange(len(leaves.v)), members))
             finer, reason = self.leaves(leaves.v[members], leaves.w[members], leaves.ylo[members],
-                                        leaves.yhi[members], fraction, kept)
+                                        leaves.yhi[members], fraction, kept, budget)
             if finer is None:
                 break
             leaves = Cells.joined([settled, finer])
@@ -609,14 +645,16 @@ class Tree:
         for best, members in groups:
             k = first + int(np.argmin(relaxed[first:first + len(best)]))
             first += len(best)
-            R, t = Rs[k], ts[k]
-            r = self.judge.evaluate(R, t)[0]
-            if self.L is not None and r @ r > self.root**2:  # refined on the test itself, deviations included
-                R, t, r, _ = levenberg_marquardt(self.judge, R, t, max_iterations=REFINE_STEPS)
+            R, t, cost = Rs[k], ts[k], float(relaxed[k])
+            if self.judge is not None:
+                r = self.judge.evaluate(R, t)[0]
+                if self.L is not None and r @ r > self.root**2:  # refined on the test itself, deviations included
+                    R, t, r, _ = levenberg_marquardt(self.judge, R, t, max_iterations=REFINE_STEPS)
+                cost = float(r @ r)
             # How far any pose of the region that may pass puts a touch from where the refined pose puts it.
             x_ref = (self.points - t) @ R
             extent = float(np.max(np.linalg.norm(centre[members] - x_ref[None], axis=2) + reach[members]))
-            out.append(Region((R, t), float(r @ r) <= self.root**2, extent, members, float(relaxed[k])))
+            out.append(Region((R, t), cost <= self.root**2, extent, members, float(relaxed[k])))
         out.sort(key=lambda region: region.cost)
         return out
 

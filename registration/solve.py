@@ -81,8 +81,8 @@ def solve(problem, initial_pose=None, complete=True, found=None):
             # The region leaves out some sensors' rows: they may fix the pose within it, or leave two poses
             # there; the search cannot tell which, so it claims neither (exit 6, not underdetermined).
             solutions.search = "incomplete"
-            solutions.reason = (f"{found.left} sensor touch{'es' if found.left > 1 else ''} not searched, and the "
-                                f"rest leave a region {solutions.extent_mm:.2f} mm wide")
+            solutions.reason = (f"{found.left} sensor touch{'es' if found.left > 1 else ''} not searched in full, and "
+                                f"the rest leave a region {solutions.extent_mm:.2f} mm wide")
             for s in solutions:
                 s.wide = False
     return told_apart(solutions, problem.sigma)

@@ -27,79 +27,164 @@ farther than ``reach`` from a centre has ``d^2 kappa2 > T`` there (``kappa2`` fa
 slowly than ``d^2`` rises), so it fails, and the search may take ``reach`` as the gap.
 
 So a pose that passes (cost at most ``T``) has its stand-ins' cost at most ``T / min kappa2``: the search
-with that threshold holds every pose that passes. Sensors that move on both sides, plane sensors on a
-plane, a line or a cylinder (a locus), and every sensor on a printed part (whose deviations move the rows
-in ways the point's own modes do not), have no stand-in: the search leaves them out and says so.
+with that threshold holds every pose that passes. On a printed part a pose passes when its rows are ``n +
+J_d z`` with ``|n|^2 <= T`` and ``z^T S^-1 z <= q`` (docs/registration.md); the same argument on ``r -
+J_d z`` bounds the stand-in's rows less their deviation, and the stand-in takes its sensor's feature's
+modes (:attr:`StandIn.source`): rigidly with the element, and a radius mode along the sensor's or the
+feature's normal; its deviation bound is :func:`deviation_bound_mm` (a point touch's own where it lies on
+the feature itself). Sensors that move on both sides and plane sensors on a plane, a line or a cylinder
+(a locus) have no stand-in: the search leaves them out and says so.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into the generated standalone
 ``register.py``.
 """
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from .contacts import DIRECTION_KEYS, POINT_KEYS
-from .elements import element
+from .elements import cross, element
 from .features import Extent, Line, Point, Sphere
 from .noise import is_point_sensor
-from .patches import patch_size
+from .patches import patch_box, patch_size
+from .problem import Problem
 from .touches import point_touches
 
 REACH_STEPS = (2.0, 4.0, 8.0, 16.0, 32.0)  # multiples of sqrt(T) tried as the gap a centre's stand-in may have
+PLACES_GROWTH_MM = 2.0  # a patch's box grown by this holds where a stand-in on it is measured (its slack is less)
+
+
+@dataclass
+class StandIn:
+    """A sensor touch's stand-in: a point touch at ``point`` (1, 3) mm, measurement frame, on ``feature``,
+    costing at most the touch's cost over ``kappa2``. On a printed part the sensor's own ``source`` feature's
+    modes move it: rigidly with its element, whose places lie in the hull of ``places`` (n, 3) mm, fixture
+    frame; a radius mode (per mm) moves the element off the point by ``move`` (fixture frame) or by the pose's
+    turn of ``sensor_move`` (measurement frame: the sensor's own normal); ``own``: the stand-in lies on the
+    source itself, a point touch like any other."""
+
+    feature: object
+    point: np.ndarray
+    kappa2: float
+    source: object
+    places: np.ndarray = None
+    move: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    sensor_move: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def own(self):
+        return self.feature is self.source
 
 
 def stand_ins(problem, threshold):
-    """The point and ball touches of the problem with a stand-in for every sensor touch that has one:
-    (groups, kappa2, left), ``kappa2`` the least of their factors (module doc) and ``left`` the number of
-    sensor touches left out."""
-    points = [g for g in problem.groups if g.points is not None]
-    sensors = [g for g in problem.groups if g.points is None]
-    if problem.tolerance is not None:
-        return points, 1.0, sum(g.count for g in sensors)
-    groups, kappa2, left = list(points), 1.0, 0
-    for g in sensors:
-        for k in range(g.count):
-            found = stand_in(g, k, threshold, problem.lever)
-            if found is None:
+    """The point and ball touches of the problem, then a stand-in for every sensor touch that has one:
+    (groups, kappa2, left, stand-ins), ``kappa2`` the least of their factors (module doc), ``left`` the
+    number of sensor touches not searched in full (no stand-in, or one with fewer rows than the touch: a
+    normal's or a tangency's rows left out), the :class:`StandIn` of each of the last groups."""
+    groups = [g for g in problem.groups if g.points is not None]
+    kappa2, left, found = 1.0, 0, []
+    for g in problem.groups:
+        for k in range(g.count if g.points is None else 0):
+            one = stand_in(g, k, threshold, problem.lever)
+            if one is None or (problem.tolerance is not None and not one.own and not np.all(np.isfinite(one.places))):
                 left += 1
                 continue
-            feature, point, factor = found
-            groups.append(point_touches(feature, point, g.index[k:k + 1]))
-            kappa2 = min(kappa2, factor)
-    return groups, kappa2, left
+            group = point_touches(one.feature, one.point, g.index[k:k + 1])
+            left += Problem([group]).size < Problem([g]).size // g.count
+            groups.append(group)
+            kappa2 = min(kappa2, one.kappa2)
+            found.append(one)
+    return groups, kappa2, left, found
 
 
 def stand_in(group, k, threshold, lever_mm):
-    """Touch k of a sensor group as (feature, point (1, 3) mm in the measurement frame, kappa2), or None
-    (module doc)."""
+    """Touch k of a sensor group's :class:`StandIn`, or None (module doc)."""
     ctype, feature = group.ctype, group.feature
-    if ctype.is_locus:
-        return None
     s = {key: value[k] for key, value in _rows(group.sensor.geometry, group.count).items()}
     f = {key: value[k] for key, value in _rows(group.fixture.geometry, group.count).items()}
     rho = float(group.rho[k])
     plain = is_point_sensor(group.sensor)
     name = f"{feature.id}#{int(group.index[k])}"
+    if ctype.is_locus:
+        return _on_a_known_line(group, s, rho, name, threshold, lever_mm)
     if ctype.sensor_fixed and ctype.fixture_fixed:
-        # Both points known: they coincide, the gap turning about o.
-        return _centred(Point(name, f["o"]), s["o"], 0.0, threshold, lever_mm, plain)
+        # Both points known: they coincide, the gap turning about o; a radius mode moves the known point outward.
+        kappa2 = _centred(0.0, threshold, lever_mm, plain)
+        return kappa2 and StandIn(Point(name, f["o"]), s["o"][None], kappa2, feature, f["o"][None],
+                                  f.get("u", np.zeros(3)))
     if ctype.sensor_fixed:
         if not element(ctype.sensor).surface:
-            return feature, s["o"][None], 1.0  # a probe's or a line's known point on the feature
-        target = s["o"] + rho * s["u"]
+            return StandIn(feature, s["o"][None], 1.0, feature)  # a probe's or a line's known point on the feature
+        target = s["o"] + rho * s["u"]  # a radius mode moves it along the sensor's normal, off the element
         core = element(ctype.fixture).core
         if core == "point":
-            return _centred(Point(name, feature.core()[1]), target, rho, threshold, lever_mm, plain)
+            centre = feature.core()[1]
+            kappa2 = _centred(rho, threshold, lever_mm, plain)
+            return kappa2 and StandIn(Point(name, centre), target[None], kappa2, feature, centre[None],
+                                      sensor_move=-s["u"])
         if core == "plane":
-            return (feature, target[None], 1.0) if rho == 0.0 else None
+            return StandIn(feature, target[None], 1.0, feature) if rho == 0.0 else None
+        kappa2 = 1.0 / (1.0 + (rho / lever_mm) ** 2)
         if ctype.fixture == "L":
-            return feature, target[None], 1.0 / (1.0 + (rho / lever_mm) ** 2)
-        # The cylinder's axis, as far along it as the patch reaches and the offset can carry the point.
-        return _axis(name, feature, rho), target[None], 1.0 / (1.0 + (rho / lever_mm) ** 2)
+            return StandIn(feature, target[None], kappa2, feature)
+        axis = _axis(name, feature, rho)
+        return StandIn(axis, target[None], kappa2, feature, _corners(axis), sensor_move=-s["u"])
     if ctype.fixture_fixed and ctype.sensor == "S" and plain:
-        if element(ctype.fixture).surface:
-            return Point(name, f["o"] + rho * f["u"]), s["c"][None], 1.0  # the ball's centre at the offset point
-        return Sphere(name, f["o"], float(s["r"])), s["c"][None], 1.0  # a ball radius from the known point
+        if element(ctype.fixture).surface:  # the ball's centre at the offset point, which moves with the feature
+            offset = f["o"] + rho * f["u"]
+            return StandIn(Point(name, offset), s["c"][None], 1.0, feature, offset[None], f["u"])
+        # A ball radius from the known point of an edge or a point (which have no radius).
+        return StandIn(Sphere(name, f["o"], float(s["r"])), s["c"][None], 1.0, feature, f["o"][None])
     return None
+
+
+def _on_a_known_line(group, s, rho, name, threshold, lever_mm):
+    """A plane sensor with its contact line known (point ``o``, direction ``e``) under a cylinder or an edge:
+    the point ``tau = o + rho n`` lies on the axis or the edge. Its rows are ``n.d``, ``n.(p - o) - rho``,
+    ``d.f`` and ``f.(p - o)`` (``f = n x e``, ``p`` and ``d`` the axis's anchor and direction, tangency and
+    pointwise rows left out), so with ``w = p - tau = r_2 n + r_4 f + lambda e`` and ``d = r_1 n + r_3 f + c
+    e`` the distance of tau from the axis is ``|P_d w| <= |A r|``, ``A r = (r_2 - (lambda/c) r_1, r_4 -
+    (lambda/c) r_3)`` (``P_d e = -P_d (r_1 n + r_3 f) / c``). Then ``cost >= |A r|^2 / lambda_max(A C
+    A^T)``; ``A J_v`` has the orthonormal rows n and f, and ``A G`` is ``e`` times ``(|A r|_f, rho + |A
+    r|_n)`` (a turn about o moves the anchor less ``lambda / c`` times the direction by the turn of ``(rho
+    + ...) n + ... f``), so ``lambda_max <= 1 + (rho + |A r|)^2 / L^2``: the gap form of :func:`_centred`."""
+    ctype, feature = group.ctype, group.feature
+    if not (ctype.sensor == "PL" and ctype.sensor_fixed and ctype.fixture in ("C", "L") and "f" in s
+            and abs(float(s["n"] @ (s["o"] - s["q"]))) <= 1e-9 * (1.0 + float(np.abs(s["o"]).max()))):
+        return None
+    kappa2 = _centred(rho, threshold, lever_mm, False)
+    target = s["o"] + rho * s["n"]  # a radius mode moves it along the plane's normal, off the axis
+    if not kappa2:
+        return None
+    if ctype.fixture == "L":
+        return StandIn(feature, target[None], kappa2, feature)
+    axis = _axis(name, feature, rho)
+    return StandIn(axis, target[None], kappa2, feature, _corners(axis), sensor_move=-s["n"])
+
+
+def deviation_bound_mm(tolerance, feature, places, q):
+    """How far (mm) the printed feature's deviation can move a stand-in's rows, ``e = sqrt(q) max (sqrt(
+    lambda_max(A_x^T S A_x)) + sqrt(s_r))`` over the places x: a mode moves the element at x by ``omega x x +
+    v`` (the rows of ``A_x``), a radius mode moves the stand-in's point along a unit direction (``s_r`` the
+    variance of the radius's change), and ``z^T S^-1 z <= q`` for the modes of a pose that passes (``S``
+    their covariance), so each row vector moves by at most that. ``sqrt(lambda_max)`` of an affine map of x
+    is convex in x: its largest over a box is at a corner."""
+    s = tolerance.slices[feature.id]
+    m = tolerance.modes[feature.id]
+    S = tolerance.covariance[s, s]
+    twist = np.where(m.radius[:, None], 0.0, m.twists)
+    A = cross(twist[None, :, :3], np.asarray(places, float)[:, None]) + twist[None, :, 3:]  # (n, k, 3)
+    largest = np.linalg.eigvalsh(np.einsum("nki,kl,nlj->nij", A, S, A))[:, -1]
+    radius = m.radius.astype(float)
+    return float(np.sqrt(q) * (np.sqrt(np.max(np.maximum(largest, 0.0))) + np.sqrt(max(radius @ S @ radius, 0.0))))
+
+
+def _corners(feature):
+    """The corners (8, 3) of the feature's patch box grown by ``PLACES_GROWTH_MM`` (infinite when unbounded)."""
+    low, high = patch_box(feature)
+    low, high = low - PLACES_GROWTH_MM, high + PLACES_GROWTH_MM
+    return np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
 
 
 def _axis(name, cylinder, rho):
@@ -114,16 +199,17 @@ def _axis(name, cylinder, rho):
     return Line(name, cylinder.point, cylinder.axis, Extent(interval=(middle - half, middle + half)))
 
 
-def _centred(centre, point, rho, threshold, lever_mm, plain):
-    """A point that lies on a centre: kappa2 with the gap as large as a pose that passes can have it."""
+def _centred(rho, threshold, lever_mm, plain):
+    """kappa2 of a point that lies on a centre, with the gap as large as a pose that passes can have it
+    (None when no gap of ``REACH_STEPS`` fails by itself)."""
     if plain:
-        return centre, point[None], 1.0
+        return 1.0
     root = float(np.sqrt(threshold))
     for step in REACH_STEPS:
         reach = step * root
         kappa2 = 1.0 / (1.0 + ((rho + reach) / lever_mm) ** 2)
         if reach**2 * kappa2 > threshold:
-            return centre, point[None], kappa2
+            return kappa2
     return None
 
 

@@ -2,7 +2,7 @@
 
 Independent of the engine on purpose: its pose parametrisation, residuals, starts and optimiser
 (``scipy.optimize.least_squares``) are written here; only the features' own geometry is shared
-(``Feature.signed_distance`` and ``Feature.contains``, what a touch on the part means).
+(``Feature.signed_distance``, ``normal_at``, ``closest_point`` and ``contains``, what a touch on the part means).
 
 Many seeded random starts (rotation uniform on SO(3), the touches' centroid mapped to a uniform point
 of the fixture's bounding box), and the true pose when it is known, are each refined to a local
@@ -15,12 +15,33 @@ on them. A pose is kept when it passes: every touch lies within
 ``EXACT_RMS_MM``) or pass a chi-square test at the touch noise sigma. Kept poses closer than
 ``SAME_ROTATION_RAD`` and ``SAME_TRANSLATION_MM`` are one.
 
-Point touches, labelled or not (each then on the feature whose patch lies nearest it), and the two sensors
-of the paper's Example One are modelled: a plane sensor lying on a plane feature (its normal against the
-feature's, its known point on the plane and on the patch) and a line sensor crossing a line feature (the two
-lines meet, the crossing on the line's extent).
+Point touches, labelled or not (each then on the feature whose patch lies nearest it), and sensor contacts
+(:func:`contact_model`) are modelled, each from its geometry, as what it means for the touch to have happened
+at the pose (the feature in the fixture frame, the sensor's measurement-frame geometry mapped into it):
+
+* the two sensors of the paper's Example One: a plane sensor lying on a plane feature (its normal against the
+  feature's, its known point on the plane and on the patch) and a line sensor crossing a line feature, both
+  mobile (the two lines meet, the crossing on the line's extent);
+* a fixed surface sensor (a ball, plane or cylinder; its contact point p and its outward normal there known)
+  on a mobile plane, sphere or cylinder: p on the surface, and the feature's outward normal at p against the
+  sensor's (two rows);
+* a fixed line sensor (point p, direction d) on a mobile sphere or cylinder: p on the surface, d tangent to it;
+* a fixed probe point on a mobile feature: a point touch;
+* both sides fixed (the feature's contact point o known too): p maps onto o (three rows), and the sensor's
+  normal against the feature's at o (two rows), perpendicular to a line feature, or a line sensor tangent to
+  a surface (one row);
+* a mobile ball (centre c, radius r) on a fixed feature side at o: c at o + r n on a surface (n its outward
+  normal at o, three rows); on a line, a ball radius from o across the line (two rows: the line is tangent to
+  the ball at o); on a point, a ball radius from o.
+
+Each contact's known point (a fixed sensor's p, a ball's centre) must lie on its feature's patch. The rows
+are whitened for the noise model the engine is tested with: each sensor placed with a random translation of
+sigma (each axis) and a turn of sigma / ``PAD_LEVER_MM`` rad about its contact point (an orientation row is
+scaled by ``PAD_LEVER_MM``; one that also sees the contact point slide over a curved surface is scaled back
+by that slide's share).
 """
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,33 +106,296 @@ def bounding_box_mm(features):
     return points.min(0), points.max(0)
 
 
+def _beyond_patch_mm(feature, points):
+    """How far (n,) mm beyond its feature's patch each fixture-frame point's projection on it lies (0 inside)."""
+    q = feature.closest_point(points)
+    core, anchor, direction, _ = feature.core()
+    along = (q - anchor) @ direction if core == "line" else None
+    return np.maximum(-feature.extent.margin(q, along), 0.0)
+
+
+# Sensor contacts. A contact's sensor is given in the measurement frame; the models keep its points less the
+# touches' centroid (:meth:`_Contact.centred`) and map them into the fixture frame at k poses (A, b) at once:
+# a point s to A s + b, a direction d to A d.
+
+FIXED_SIDES = ("F", "M")
+SURFACES = ("plane", "sphere", "cylinder")  # features with an outward normal
+NORMAL_SLOPE_STEP_MM = 1e-3  # central-difference step of a feature's normal along its surface
+
+
+def _unit(v):
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+def _points(A, b, s):
+    """A point s (3,) at k poses: (k, 3)."""
+    return A @ s + b
+
+
+def _normal_slope(feature, q, e):
+    """How the feature's outward normal turns (k, 3) per mm as the point q (k, 3) moves along e (k, 3)."""
+    h = NORMAL_SLOPE_STEP_MM
+    return (feature.normal_at(q + h * e) - feature.normal_at(q - h * e)) / (2.0 * h)
+
+
+def _whiten(rows, slopes):
+    """Orientation rows (k, m), scaled by ``PAD_LEVER_MM``, whose noise is the sensor's turn (sigma each, not
+    correlated) plus ``PAD_LEVER_MM`` times its contact point's slide (sigma each axis) along ``slopes`` (k, m,
+    3): whitened, ``L^-1 rows`` with ``L L^T = I + PAD_LEVER_MM^2 slopes slopes^T``."""
+    m = rows.shape[1]
+    C = np.eye(m) + PAD_LEVER_MM**2 * np.einsum("kil,kjl->kij", slopes, slopes)
+    L = np.linalg.cholesky(C)
+    return np.linalg.solve(L, rows[..., None])[..., 0]
+
+
+class _Contact:
+    """One sensor contact: ``size`` rows, ``anchor`` (its measurement-frame point for the touches' centroid),
+    ``rows(A, b)`` (k, size) and ``located(A, b)`` (k, 3): the fixture-frame point that must lie on the
+    feature's patch."""
+
+    POINT_KEYS = ()  # the attributes that are measurement-frame points
+
+    def centred(self, centroid_mm):
+        """The contact with its measurement-frame points less the touches' centroid."""
+        out = copy.copy(self)
+        for key in self.POINT_KEYS:
+            setattr(out, key, getattr(self, key) - centroid_mm)
+        return out
+
+
+class _PlaneOnPlane(_Contact):
+    """Example One's plane sensor lying on a plane feature (a face contact): the sensor's normal against the
+    feature's (two rows scaled by ``PAD_LEVER_MM``) and its point on the plane; the point on the patch."""
+
+    POINT_KEYS = ("s",)
+    size = 3
+
+    def __init__(self, feature, sensor):
+        self.feature, self.s = feature, np.asarray(sensor["point"], float)
+        self.d = _unit(sensor["normal"])
+        self.anchor = self.s
+
+    def rows(self, A, b):
+        feature = self.feature
+        s_fix, d_fix = _points(A, b, self.s), A @ self.d
+        e = np.array(_perpendiculars(feature.normal))
+        return np.hstack([PAD_LEVER_MM * (d_fix + feature.normal) @ e.T,
+                          ((s_fix - feature.point) @ feature.normal)[:, None]])
+
+    def located(self, A, b):
+        return _points(A, b, self.s)
+
+
+class _LinesCross(_Contact):
+    """Example One's line sensor crossing a line feature, both mobile: the two lines meet (one row, mm); where
+    they cross on the line's extent."""
+
+    POINT_KEYS = ("s",)
+    size = 1
+
+    def __init__(self, feature, sensor):
+        self.feature, self.s = feature, np.asarray(sensor["point"], float)
+        self.d = _unit(sensor["direction"])
+        self.anchor = self.s
+
+    def rows(self, A, b):
+        feature = self.feature
+        s_fix, d_fix = _points(A, b, self.s), A @ self.d
+        m = np.cross(d_fix, feature.direction)
+        return (np.einsum("ki,ki->k", s_fix - feature.point, m) / np.linalg.norm(m, axis=1))[:, None]
+
+    def located(self, A, b):
+        # The point of the line feature closest to the sensor line: where they cross.
+        feature = self.feature
+        s_fix, d_fix = _points(A, b, self.s), A @ self.d
+        u, w = feature.direction, feature.point - s_fix
+        c = d_fix @ u
+        along = (c * np.einsum("ki,ki->k", d_fix, w) - w @ u) / (1.0 - c * c)
+        return feature.point + along[:, None] * u
+
+
+class _FixedOnMobile(_Contact):
+    """A fixed sensor, its contact point p known, on a mobile feature: p on the feature's surface (signed
+    distance, mm), and
+
+    * a surface sensor (outward normal ``normal`` at p): the feature's outward normal at p against it, two
+      rows across the sensor's normal, scaled by ``PAD_LEVER_MM`` and whitened for the slide of p over a
+      curved feature;
+    * a line sensor (direction ``direction``): tangent to the feature at p, one row ``d . n`` scaled and
+      whitened alike;
+    * a probe point: nothing more.
+    """
+
+    POINT_KEYS = ("p",)
+
+    def __init__(self, feature, p, normal=None, direction=None):
+        self.feature, self.p, self.anchor = feature, np.asarray(p, float), np.asarray(p, float)
+        self.normal = None if normal is None else _unit(normal)
+        self.direction = None if direction is None else _unit(direction)
+        if self.normal is not None:
+            self.across = np.array(_perpendiculars(self.normal))  # (2, 3), measurement frame
+        self.size = 1 + (2 if self.normal is not None else 1 if self.direction is not None else 0)
+
+    def rows(self, A, b):
+        feature = self.feature
+        q = _points(A, b, self.p)
+        out = [feature.signed_distance(q)[:, None]]
+        if self.normal is not None:
+            n_f, n_s = feature.normal_at(q), A @ self.normal
+            across = np.einsum("kij,mj->kmi", A, self.across)  # (k, 2, 3): the sensor's basis, fixture frame
+            tilt = PAD_LEVER_MM * np.einsum("kmi,ki->km", across, n_f + n_s)
+            slopes = np.stack([_normal_slope(feature, q, across[:, m]) for m in range(2)], axis=1)
+            out.append(_whiten(tilt, slopes))
+        elif self.direction is not None:
+            d = A @ self.direction
+            tilt = PAD_LEVER_MM * np.einsum("ki,ki->k", d, feature.normal_at(q))[:, None]
+            out.append(_whiten(tilt, _normal_slope(feature, q, d)[:, None]))
+        return np.hstack(out)
+
+    def located(self, A, b):
+        return _points(A, b, self.p)
+
+
+class _FixedFixed(_Contact):
+    """Both sides fixed: the sensor's contact point p maps onto the feature's known point o (three rows, mm), and
+
+    * a surface sensor (outward ``normal`` at p) on a surface feature: the feature's outward normal at o
+      against the sensor's, two rows across the feature's, scaled by ``PAD_LEVER_MM``;
+    * a surface sensor on a line feature: its normal perpendicular to the line (one row, scaled alike);
+    * a line sensor (``direction``) on a surface feature: tangent to it at o (one row, scaled alike);
+    * otherwise (a probe point, a line sensor on a line, a point feature): nothing more.
+    """
+
+    POINT_KEYS = ("p",)
+
+    def __init__(self, feature, p, o, normal=None, direction=None):
+        self.feature, self.p, self.anchor = feature, np.asarray(p, float), np.asarray(p, float)
+        self.o = np.asarray(o, float)
+        self.normal = None if normal is None else _unit(normal)
+        self.direction = None if direction is None else _unit(direction)
+        self.orientation = None
+        if self.normal is not None and feature.kind in SURFACES:
+            self.feature_normal = feature.normal_at(self.o)[0]
+            self.across = np.array(_perpendiculars(self.feature_normal))
+            self.orientation = "normals"
+        elif self.normal is not None and feature.kind == "line":
+            self.orientation = "normal across the line"
+        elif self.direction is not None and feature.kind in SURFACES:
+            self.feature_normal = feature.normal_at(self.o)[0]
+            self.orientation = "line tangent"
+        self.size = 3 + {"normals": 2, None: 0}.get(self.orientation, 1)
+
+    def rows(self, A, b):
+        out = [_points(A, b, self.p) - self.o]
+        if self.orientation == "normals":
+            out.append(PAD_LEVER_MM * (A @ self.normal + self.feature_normal) @ self.across.T)
+        elif self.orientation == "normal across the line":
+            out.append(PAD_LEVER_MM * (A @ self.normal @ self.feature.direction)[:, None])
+        elif self.orientation == "line tangent":
+            out.append(PAD_LEVER_MM * (A @ self.direction @ self.feature_normal)[:, None])
+        return np.hstack(out)
+
+    def located(self, A, b):
+        return _points(A, b, self.p)
+
+
+class _BallOnFixed(_Contact):
+    """A mobile ball (centre c, radius r) on a fixed feature side, its contact point o known: the centre at
+    ``o + r n`` on a surface (n its outward normal at o; three rows, mm); on a line, a ball radius from o and
+    square to the line there (the line tangent to the ball at o; two rows); on a point, a ball radius from o
+    (one row). The centre's projection on the feature must lie on its patch."""
+
+    POINT_KEYS = ("c",)
+
+    def __init__(self, feature, c, radius, o):
+        self.feature, self.c, self.anchor = feature, np.asarray(c, float), np.asarray(c, float)
+        self.radius, self.o = float(radius), np.asarray(o, float)
+        if feature.kind in SURFACES:
+            self.target = self.o + self.radius * feature.normal_at(self.o)[0]
+            self.size = 3
+        else:
+            self.size = 2 if feature.kind == "line" else 1
+
+    def rows(self, A, b):
+        c = _points(A, b, self.c)
+        if self.feature.kind in SURFACES:
+            return c - self.target
+        out = [(np.linalg.norm(c - self.o, axis=1) - self.radius)[:, None]]
+        if self.feature.kind == "line":
+            out.append(((c - self.o) @ self.feature.direction)[:, None])
+        return np.hstack(out)
+
+    def located(self, A, b):
+        return _points(A, b, self.c)
+
+
+def _contact_type(text):
+    """The sides of a contact written ``X/F-Y/M``, sensor first: ((element, fixed), (element, fixed))."""
+    sides = []
+    for side in text.replace(" ", "").upper().split("-"):
+        element, flag = side.split("/")
+        if flag not in FIXED_SIDES:
+            raise ValueError(f"cannot read contact {text!r}")
+        sides.append((element, flag == "F"))
+    return tuple(sides)
+
+
+def _sensor_normal(sensor, p):
+    """A surface sensor's outward unit normal at its contact point p (measurement frame), or None."""
+    kind = sensor["kind"]
+    if kind == "plane":
+        return _unit(sensor["normal"])
+    if kind == "sphere":
+        return _unit(p - np.asarray(sensor["center"], float))
+    if kind == "cylinder":
+        axis = _unit(sensor["axis"])
+        r = p - np.asarray(sensor["point"], float)
+        return _unit(r - (r @ axis) * axis)
+    return None
+
+
+def contact_model(feature, contact):
+    """The brute force's model of one sensor contact (as :func:`fixturecad.registration.synthetic.plan_touches`
+    makes it): see the module doc; ValueError for a contact not modelled."""
+    sensor = contact["sensor"]
+    kind = sensor["kind"]
+    (_, sensor_fixed), (_, fixture_fixed) = _contact_type(contact["contact"])
+    pair = {kind, feature.kind}
+    if pair == {"plane"}:
+        return _PlaneOnPlane(feature, sensor)
+    locus = "plane" in pair and len(pair - {"plane"} - {"line", "cylinder"}) == 0
+    if kind == "line" and feature.kind == "line" and not sensor_fixed and not fixture_fixed:
+        return _LinesCross(feature, sensor)
+    if sensor_fixed and not locus and "point" in contact:
+        p = np.asarray(contact["point"], float)
+        normal = _sensor_normal(sensor, p)
+        direction = np.asarray(sensor["direction"], float) if kind == "line" else None
+        if fixture_fixed and "fixture" in contact:
+            return _FixedFixed(feature, p, contact["fixture"]["o"], normal, direction)
+        if not fixture_fixed and (kind == "point" or feature.kind in SURFACES):
+            return _FixedOnMobile(feature, p, normal, direction)
+    if kind == "sphere" and not sensor_fixed and fixture_fixed and "fixture" in contact:
+        return _BallOnFixed(feature, sensor["center"], sensor["radius"], contact["fixture"]["o"])
+    raise ValueError(f"no brute-force model of a {kind} sensor on a {feature.kind} ({contact['contact']})")
+
+
 class TouchResiduals:
     """The residual rows of touches at batches of poses, each pose as (A, b): ``q = A (p - c) + b``
     takes a measured point p into the fixture frame, c the touches' centroid, so that a turn and a
     shift are not coupled over the distance to the measurement origin (which slows the descent).
 
-    Rows, in order: each feature's point touches (signed distance, mm), then each contact (a plane
-    sensor: its normal against the feature's, two rows scaled by ``PAD_LEVER_MM``, and its point's
-    distance; a line sensor: its distance from the line feature).
+    Rows, in order: each feature's point touches (signed distance, mm), then each contact's rows
+    (:func:`contact_model`).
     """
 
     def __init__(self, features, touches, contacts=()):
         groups = [(features[fid], np.asarray(p, float).reshape(-1, 3)) for fid, p in touches.items() if np.size(p)]
-        sensors = []
-        for contact in contacts:
-            feature, sensor = features[contact["feature"]], contact["sensor"]
-            if sensor["kind"] == "plane" and feature.kind == "plane":
-                sensors.append(("plane", feature, np.asarray(sensor["point"], float),
-                                np.asarray(sensor["normal"], float) / np.linalg.norm(sensor["normal"])))
-            elif sensor["kind"] == "line" and feature.kind == "line":
-                sensors.append(("line", feature, np.asarray(sensor["point"], float),
-                                np.asarray(sensor["direction"], float) / np.linalg.norm(sensor["direction"])))
-            else:
-                raise ValueError(f"no brute-force model of a {sensor['kind']} sensor on a {feature.kind}")
-        self.centroid_mm = np.vstack([p for _, p in groups] + [c[2] for c in sensors]).mean(0)
+        models = [contact_model(features[contact["feature"]], contact) for contact in contacts]
+        self.centroid_mm = np.vstack([p for _, p in groups] + [m.anchor[None] for m in models]).mean(0)
         self.groups = [(feature, p - self.centroid_mm) for feature, p in groups]
-        self.contacts = [(kind, feature, s - self.centroid_mm, d) for kind, feature, s, d in sensors]
-        self.size = sum(len(p) for _, p in self.groups) + sum(3 if c[0] == "plane" else 1 for c in self.contacts)
+        self.contacts = [m.centred(self.centroid_mm) for m in models]
+        self.size = sum(len(p) for _, p in self.groups) + sum(m.size for m in self.contacts)
 
     def fixture2meas(self, A, b):
         """The ``fixture2meas`` (4, 4) of a pose (A, b)."""
@@ -125,48 +409,35 @@ class TouchResiduals:
         return R.T, R.T @ (self.centroid_mm - t)
 
     def rows(self, A, b, inside=False):
-        """Residuals (k, size) at k poses, A (k, 3, 3), b (k, 3); ``inside``: and the point touches'
-        distances beyond their patches, less ``INSIDE_TARGET_MM``, weighted ``INSIDE_WEIGHT`` (k, touches)."""
+        """Residuals (k, size) at k poses, A (k, 3, 3), b (k, 3); ``inside``: and the point touches' and
+        contact locations' distances beyond their patches, less ``INSIDE_TARGET_MM``, weighted ``INSIDE_WEIGHT``
+        (k, touches)."""
         k, out = len(A), []
         if inside:
             out.append(INSIDE_WEIGHT * np.maximum(self.outside_mm(A, b) - INSIDE_TARGET_MM, 0.0))
         for feature, P in self.groups:
             q = np.einsum("kij,nj->kni", A, P) + b[:, None]
             out.append(feature.signed_distance(q.reshape(-1, 3)).reshape(k, len(P)))
-        for kind, feature, s, d in self.contacts:
-            s_fix, d_fix = A @ s + b, A @ d
-            if kind == "plane":
-                e = np.array(_perpendiculars(feature.normal))
-                out.append(PAD_LEVER_MM * (d_fix + feature.normal) @ e.T)
-                out.append(((s_fix - feature.point) @ feature.normal)[:, None])
-            else:
-                m = np.cross(d_fix, feature.direction)
-                out.append((np.einsum("ki,ki->k", s_fix - feature.point, m) / np.linalg.norm(m, axis=1))[:, None])
+        for model in self.contacts:
+            out.append(model.rows(A, b))
         return np.hstack(out)
 
     def contact_points(self, A, b):
         """(feature, fixture-frame point) of every touch and contact location at one pose (A, b)."""
         out = [(feature, P @ A.T + b) for feature, P in self.groups]
-        for kind, feature, s, d in self.contacts:
-            s_fix, d_fix = A @ s + b, A @ d
-            if kind == "line":
-                # The point of the line feature closest to the sensor line: where they cross.
-                u, w = feature.direction, feature.point - s_fix
-                c = u @ d_fix
-                along = (c * (d_fix @ w) - u @ w) / (1.0 - c * c)
-                s_fix = feature.point + along * u
-            out.append((feature, s_fix[None]))
+        out += [(model.feature, model.located(A[None], b[None])) for model in self.contacts]
         return out
 
     def outside_mm(self, A, b):
-        """How far (k, touches) mm beyond its feature's patch each point touch lies at k poses (0 inside)."""
+        """How far (k, touches) mm beyond its feature's patch each point touch and contact location lies at k
+        poses (0 inside)."""
         k, out = len(A), []
-        for feature, P in self.groups:
-            q = feature.closest_point((np.einsum("kij,nj->kni", A, P) + b[:, None]).reshape(-1, 3))
-            core, anchor, direction, _ = feature.core()
-            along = (q - anchor) @ direction if core == "line" else None
-            out.append(np.maximum(-feature.extent.margin(q, along), 0.0).reshape(k, len(P)))
-        return np.hstack(out)
+        located = [(feature, (np.einsum("kij,nj->kni", A, P) + b[:, None]).reshape(-1, 3))
+                   for feature, P in self.groups]
+        located += [(model.feature, model.located(A, b)) for model in self.contacts]
+        for feature, q in located:
+            out.append(_beyond_patch_mm(feature, q).reshape(k, -1))
+        return np.hstack(out) if out else np.zeros((k, 0))
 
     def admissible(self, A, b, tolerance_mm=PATCH_TOLERANCE_MM):
         """Whether every touch and contact location lies on its feature's patch at the pose (A, b)."""
@@ -323,7 +594,7 @@ def admissible_poses(features, touches, contacts=(), sigma_mm=0.0, truth=None, s
     # Where a passing pose is off the patches, noisy touches may pass at a pose near it on the patches:
     # pulled onto them. (Noise-free, a pose passes only where it is exact: no other pose near it does.)
     off = [(A, b) for A, b, r in minima if r @ r <= passing and not problem.admissible(A, b)]
-    if off and problem.groups and sigma_mm > 0.0:
+    if off and (problem.groups or problem.contacts) and sigma_mm > 0.0:
         minima += _minima(problem, np.array([A for A, _ in off]), np.array([b for _, b in off]), passing, inside=True)
     kept = [Pose(problem.fixture2meas(A, b), float(np.sqrt(r @ r / len(r))), float(r @ r))
             for A, b, r in minima if r @ r <= passing and problem.admissible(A, b)]

@@ -32,7 +32,7 @@ from fixturecad.registration.deviations import tolerance_from_document
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.features import features_from_json
 from fixturecad.registration.patches import patch_points
-from fixturecad.registration.synthetic import plan_touches
+from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.templates import make
 
 SIGMA_MM = 0.005  # a touch probe's repeatability, the noisy layouts' noise on each axis
@@ -125,6 +125,7 @@ class Case:
     printed: bool = False  # registered on a printed part: the fixture's recorded tolerance, as register.py does
     unlabelled: bool = False  # the touches given without their features, to the engine and the brute force
     symmetric: bool = False  # its poses are images of one another under the fixture's symmetry: none separates them
+    complete: bool = True  # its search must complete (Example One's sensors have no stand-in: it cannot)
 
 
 CASES = [
@@ -141,7 +142,7 @@ CASES = [
          _counts({"plane": 2, "cylinder": 4}), printed=True),
     Case("Example Two 3+3", "inclined-plane-cylinder", (0.0, SIGMA_MM), _counts({"plane": 3, "cylinder": 3})),
     Case("sphere-plate 2 per ball", "sphere-plate", (0.0, SIGMA_MM), _counts({"ball_1": 2, "ball_2": 2, "ball_3": 2})),
-    Case("Example One (paper plan)", "quarter-sphere", (0.0,), plan="paper"),
+    Case("Example One (paper plan)", "quarter-sphere", (0.0,), plan="paper", complete=False),
     Case("v-block 4-4-4, unlabelled", "v-block", (SIGMA_MM,), _counts({"groove_a": 4, "groove_b": 4, "end": 4}),
          unlabelled=True),
     # Its three poses are the images of the corner's symmetry: no touch tells them apart.
@@ -153,6 +154,12 @@ CASES = [
     # Six bosses leaning every way, touched by a point probe: no box axis follows their axes.
     Case("{C-R-C}x6 design's bosses 2 each", BOSSES, (0.0, SIGMA_MM),
          _counts({f"boss_{k}": 2 for k in range(1, 7)})),
+    # Designs of Table V classes whose sensors' contact points are known (stand-ins in the complete search): balls
+    # on two faces, both sides fixed (R); a ball on a face, a line sensor on a boss, probe points (G3, R-R-C,
+    # S-C); balls on two edges, both mobile, probe points on a ball and a boss (S-R, S-S, S-C).
+    Case("{R}{R} design (default plan)", "{R}{R}", (0.0, SIGMA_MM), plan="default"),
+    Case("{G3}{R-R-C}{S-C} design (default plan)", "{G3}{R-R-C}{S-C}", (0.0, SIGMA_MM), plan="default"),
+    Case("{S-R}{S-R}{S-S}{S-C} design (default plan)", "{S-R}{S-R}{S-S}{S-C}", (0.0, SIGMA_MM), plan="default"),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
@@ -188,6 +195,9 @@ def layout(case, noise_mm, index):
     else:
         touches, contacts = {fid: p @ truth[:3, :3].T + truth[:3, 3] for fid, p in case.draw(features, rng).items()}, []
     touches = {fid: p + rng.normal(scale=noise_mm, size=p.shape) for fid, p in touches.items()}
+    if contacts and noise_mm:
+        # Each sensor placed with the noise model's random rigid error (translation and turn).
+        _, contacts = perturb_touches({}, contacts, rng, noise_mm)
     return Layout(features, touches, contacts, truth, _tolerance(case.template, features) if case.printed else None)
 
 

@@ -34,15 +34,15 @@ def _blocks():
 def test_never_a_confident_wrong_pose(case, noise_mm, first, layouts):
     """No unique with a wrong pose; unique only when the brute force finds exactly one admissible pose and
     ambiguous listing all of them; inconsistent only when it finds none; a separating touch on the real
-    part that, added, gives the true pose; and a search that completes on every layout (a point-touch plan
-    that fixes the pose is never left unproven). Failures as {check: [(layout, status, poses found)]}."""
+    part that, added, gives the true pose; and a search that completes on every layout (a plan of point touches
+    and sensors with stand-ins that fixes the pose is never left unproven). Failures as {check: [(layout, status, poses found)]}."""
     outcomes = judge_all(case, noise_mm, layouts, first=first)
     failures = {check: [(first + k, o.status, o.found) for k, o in enumerate(outcomes)
                         if any(getattr(o, attribute) for attribute in attributes)]
                 for check, attributes in CHECKS.items()}
     failures["separating touch"] = [(first + k, o.separating) for k, o in enumerate(outcomes)
                                     if o.separating not in ("", "separates")]
-    if not case.plan:
+    if case.complete:
         # Not complete, and not underdetermined (which claims no pose, exit 4): exit 6, no claim, but no answer.
         failures["search not complete"] = [(first + k, o.status) for k, o in enumerate(outcomes)
                                            if o.search != "complete" and o.status != "underdetermined"]
