@@ -23,6 +23,7 @@ test). Run from the repository root:
     .venv/bin/python benchmarks/bench_design.py --all [--random 1000] [--seed 1] [--processes N]
     .venv/bin/python benchmarks/bench_design.py --classes "{T1}{S-R}" "{S}{S}{S-S}" [--random 1000]
     .venv/bin/python benchmarks/bench_design.py --classes @classes.txt  # one class a line
+    .venv/bin/python benchmarks/bench_design.py --all --random 0 --no-build  # registration only
 
 ``--classes`` takes the listed classes end to end as ``--all`` does, each
 with the random draws it gets in ``--all`` (seeded by its place in Table V).
@@ -75,7 +76,7 @@ def register(folder: Path, rng) -> tuple[str, bool]:
 
 def end_to_end(task) -> dict:
     """One class designed, built, compared with random layouts and registered (see the module doc)."""
-    index, name, members, random_layouts, seed = task
+    index, name, members, random_layouts, seed, build = task
     from fixturecad.cad.export import export
     from fixturecad.cad.solid import fixture_solid
     from fixturecad.design.combination import for_class
@@ -112,17 +113,19 @@ def end_to_end(task) -> dict:
     out["random_bound"] = None if best is None else plan_bound(best[1].features(), best[1].touches + best[1].checks)
 
     start = time.perf_counter()
+    out["solid"] = out["files"] = None
     try:
-        shape = fixture_solid(fixture)
-        out["solid"] = (shape.isValid() and len(shape.Solids()) == 1
-                        and abs(shape.Volume() - fixture.volume()) <= 1e-6 * fixture.volume())
-        with tempfile.TemporaryDirectory() as work:
-            paths = [Path(work) / "fixture.step", Path(work) / "fixture.stl"]
-            export(shape, paths, 0.01)  # the STEP read back and the STL's watertightness checked on writing
-            stl = trimesh.load(paths[1])
-            out["files"] = stl.is_watertight and abs(stl.volume - fixture.volume()) <= 1e-3 * fixture.volume()
+        if build:
+            shape = fixture_solid(fixture)
+            out["solid"] = (shape.isValid() and len(shape.Solids()) == 1
+                            and abs(shape.Volume() - fixture.volume()) <= 1e-6 * fixture.volume())
+            with tempfile.TemporaryDirectory() as work:
+                paths = [Path(work) / "fixture.step", Path(work) / "fixture.stl"]
+                export(shape, paths, 0.01)  # the STEP read back and the STL's watertightness checked on writing
+                stl = trimesh.load(paths[1])
+                out["files"] = stl.is_watertight and abs(stl.volume - fixture.volume()) <= 1e-3 * fixture.volume()
     except Exception as error:  # noqa: BLE001 - a benchmark counts failures and goes on
-        out["solid"], out["files"], out["cad_error"] = out.get("solid", False), False, str(error)[:200]
+        out["solid"], out["files"], out["cad_error"] = bool(out["solid"]), False, str(error)[:200]
     out["build_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -172,7 +175,7 @@ def all_classes(args) -> None:
         raise SystemExit(f"not classes of Table V: {' '.join(unknown)}")
     chosen = list(enumerate(found))[:args.limit] if args.classes is None else [
         (i, item) for i, item in enumerate(found) if item.name in args.classes]
-    tasks = [(i, item.name, item.members, args.random, args.seed) for i, item in chosen]
+    tasks = [(i, item.name, item.members, args.random, args.seed, not args.no_build) for i, item in chosen]
     um = lambda b: "-" if b is None or b[0] is None else f"{b[0] * 1e3:7.1f} um {b[1] * 1e3:7.1f} mdeg"  # noqa: E731
     print("class | design: default-plan bound at 5 um | best random | D design - D random | solid, files | "
           "noise-free (search) | 5 um")
@@ -182,7 +185,8 @@ def all_classes(args) -> None:
         for r in pool.map(guarded, tasks, chunksize=1):
             results.append(r)
             gain = "-" if r["random_information"] is None else f"{r['information'] - r['random_information']:+.2f}"
-            checks = ", ".join("ok" if r.get(key) else "FAILED" for key in ("solid", "files"))
+            checks = ", ".join("-" if r.get(key, False) is None else "ok" if r[key] else "FAILED"
+                               for key in ("solid", "files"))
             print(f"{r['class']} | {um(r['bound'])} | {um(r['random_bound'])} | {gain} | {checks} | "
                   f"{r['exact_status']} ({r['exact_search']}) | "
                   f"{r['noisy_status']} {r.get('error_over_bound', float('nan')):.2f} x bound"
@@ -196,10 +200,12 @@ def all_classes(args) -> None:
     ratios = [np.exp((r["random_information"] - r["information"]) / 6) for r in results
               if r["random_information"] is not None]
     print(f"machine: {describe()}")
-    print(f"classes designed: {n}/{n}; one valid solid of the analytic volume: {count('solid')}/{n}; "
-          f"STEP read back as the solid and STL watertight, both within 0.1 %: {count('files')}/{n}")
-    print(f"default plan's D at least the best of {args.random} random layouts': {beats}/{n} "
-          f"(the random's D^(1/6) over the design's: median {np.median(ratios):.2f}, worst {max(ratios):.2f})")
+    print(f"classes designed: {n}/{n}" + ("" if args.no_build else
+          f"; one valid solid of the analytic volume: {count('solid')}/{n}; "
+          f"STEP read back as the solid and STL watertight, both within 0.1 %: {count('files')}/{n}"))
+    if ratios:
+        print(f"default plan's D at least the best of {args.random} random layouts': {beats}/{n} "
+              f"(the random's D^(1/6) over the design's: median {np.median(ratios):.2f}, worst {max(ratios):.2f})")
     print(f"noise-free at a random pose: exact and unique {count('exact')}/{n}; "
           + ", ".join(f"{k} {v}" for k, v in sorted(Counter(r["exact_status"] for r in results).items())))
     print("noise-free, how the poses were looked for: "
@@ -223,6 +229,8 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=None, help="with --all: the first N classes only")
     parser.add_argument("--classes", nargs="+", metavar="CLASS", help="these classes end to end, as with --all")
     parser.add_argument("--processes", type=int, default=os.cpu_count(), help="the pool's processes")
+    parser.add_argument("--no-build", action="store_true", help="with --all or --classes: design and register only, "
+                        "no solid or files (a coverage run of the registration)")
     args = parser.parse_args()
     if args.all or args.classes:
         return all_classes(args)
