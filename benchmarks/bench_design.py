@@ -143,7 +143,10 @@ def end_to_end(task) -> dict:
     problem = Problem(build_groups(by_id, touches, contacts=contacts), SIGMA_MM)
     residuals, _ = problem.evaluate(truth[:3, :3], truth[:3, 3])
     dof = len(residuals) - 6
-    out["truth_passes"] = dof <= 0 or float(residuals @ residuals) <= chi_square_quantile(CHI2_CONFIDENCE, dof)
+    # The rows are in mm, of covariance sigma^2 I: the test is on the cost over sigma^2 (without it, on mm^2, the
+    # truth "passed" always, and every inconsistent answer counted as false until 2026-11-26).
+    out["truth_passes"] = dof <= 0 or float(residuals @ residuals) <= SIGMA_MM**2 * chi_square_quantile(
+        CHI2_CONFIDENCE, dof)
     out["noisy_status"] = noisy["status"]
     if noisy["pose"] is not None and out["bound"][0] is not None:
         error_t, error_r = pose_errors(np.array(noisy["pose"]), truth)
