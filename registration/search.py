@@ -117,7 +117,7 @@ def search(problem, threshold):
 
 def stand_in_tree(problem, threshold):
     """The :class:`Tree` over the problem's point and ball touches and its sensors' stand-ins, the threshold
-    divided by their factor (:mod:`.stand_ins`), and the number of sensor touches left out."""
+    divided by their factor (:mod:`.stand_ins`), and the number of sensor touches not searched in full."""
     groups, kappa2, left, found = stand_ins(problem, threshold)
     problem = Problem(groups, problem.sigma, problem.lever, problem.tolerance)
     return Tree(problem, threshold / kappa2, None, found), left
