@@ -146,6 +146,11 @@ def _box(feature):
     return points.min(axis=0) - pad, points.max(axis=0) + pad
 
 
+def box_corners(low, high):
+    """The eight corners (8, 3) of the box ``low``-``high`` (mm)."""
+    return np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
+
+
 @dataclass(frozen=True)
 class PatchSize:
     """Where a patch lies and how far it reaches, fixture frame.

@@ -57,7 +57,7 @@ from .elements import cross, distance_and_outward, perpendicular_basis
 from .deviations import largest_row_variance
 from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
-from .patches import patch_box, patch_points
+from .patches import box_corners, patch_box, patch_points
 from .pose import rotation_from_vector, vector_from_rotation
 from .problem import Problem
 from .stand_ins import deviation_bound_mm, stand_ins
@@ -749,7 +749,7 @@ def deviation_bound(tolerance, feature, q):
     convex, on the patch grid otherwise."""
     if feature.kind == "plane":
         low, high = patch_box(feature)
-        points = np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
+        points = box_corners(low, high)
     else:
         points = patch_points(feature)
     return np.sqrt(q * largest_row_variance(tolerance, feature, points))

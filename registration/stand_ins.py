@@ -47,7 +47,7 @@ from .contacts import DIRECTION_KEYS, POINT_KEYS
 from .elements import cross, element
 from .features import Extent, Line, Point, Sphere
 from .noise import is_point_sensor
-from .patches import patch_box, patch_size
+from .patches import box_corners, patch_box, patch_size
 from .problem import Problem
 from .touches import point_touches
 
@@ -84,14 +84,15 @@ def stand_ins(problem, threshold):
     normal's or a tangency's rows left out), the :class:`StandIn` of each of the last groups."""
     groups = [g for g in problem.groups if g.points is not None]
     kappa2, left, found = 1.0, 0, []
-    for g in problem.groups:
-        for k in range(g.count if g.points is None else 0):
+    for g in (g for g in problem.groups if g.points is None):
+        rows = Problem([g]).size // g.count  # each touch's rows
+        for k in range(g.count):
             one = stand_in(g, k, threshold, problem.lever)
             if one is None or (problem.tolerance is not None and not one.own and not np.all(np.isfinite(one.places))):
                 left += 1
                 continue
             group = point_touches(one.feature, one.point, g.index[k:k + 1])
-            left += Problem([group]).size < Problem([g]).size // g.count
+            left += Problem([group]).size < rows
             groups.append(group)
             kappa2 = min(kappa2, one.kappa2)
             found.append(one)
@@ -183,8 +184,7 @@ def deviation_bound_mm(tolerance, feature, places, q):
 def _corners(feature):
     """The corners (8, 3) of the feature's patch box grown by ``PLACES_GROWTH_MM`` (infinite when unbounded)."""
     low, high = patch_box(feature)
-    low, high = low - PLACES_GROWTH_MM, high + PLACES_GROWTH_MM
-    return np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
+    return box_corners(low - PLACES_GROWTH_MM, high + PLACES_GROWTH_MM)
 
 
 def _axis(name, cylinder, rho):

@@ -10,7 +10,7 @@ from scipy.sparse.csgraph import connected_components
 from fixturecad.build import features_document
 from fixturecad.registration.deviations import largest_row_variance, tolerance_from_document
 from fixturecad.registration.features import Cylinder, Extent, features_from_json
-from fixturecad.registration.patches import patch_points
+from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import Tree, _joined, search, stand_in_tree, threshold_mm2
@@ -279,7 +279,7 @@ def test_the_deviation_bound_holds_on_the_patch(name):
     for fid, feature in features.items():
         if feature.kind == "plane":
             low, high = np.array([patch_points(feature).min(0), patch_points(feature).max(0)])
-            corners = np.array([[(low, high)[k >> j & 1][j] for j in range(3)] for k in range(8)])
+            corners = box_corners(low, high)
             bound = largest_row_variance(tolerance, feature, corners)
         else:
             bound = largest_row_variance(tolerance, feature, patch_points(feature))
