@@ -77,6 +77,8 @@ SETTLED_MM = 0.05  # ... a region being settled when its pose passes and its ext
 RANK_ROTATIONS = np.array([[0.0, 0.0, 0.0], [0.9, -0.4, 0.3], [-0.5, 1.1, 0.7]])  # rad
 NARROW_ANGLE = 4.0  # rad: a cell whose rotation vectors are shorter than this is narrowed to its model's ellipsoid ...
 NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
+WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses) tries its best cell's pose on ``stop`` ...
+WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions' poses that pass
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
@@ -94,6 +96,15 @@ class Regions:
     reason: str = ""
     cells: list = field(default_factory=list)
     left: int = 0
+    weak: bool = False  # stopped at the pose (the first of ``poses``) that ``stop`` called too weak to judge
+
+
+class WeakPose(Exception):
+    """The search's ``stop`` called a pose too weakly determined to judge: ``pose`` (R, t)."""
+
+    def __init__(self, pose):
+        super().__init__()
+        self.pose = pose
 
 
 def threshold_mm2(problem):
@@ -101,16 +112,17 @@ def threshold_mm2(problem):
     return problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
 
 
-def search(problem, threshold):
+def search(problem, threshold, stop=None):
     """Every region of poses that may pass ``threshold`` (cost, mm^2; on a printed part,
     ``problem.tolerance``, with the part's deviations) on the point and ball touches and the sensors' stand-ins
     (:mod:`.stand_ins`): :class:`Regions`, ``left`` the sensor touches not searched in full. Not complete when those
-    rows cannot fix a pose."""
+    rows cannot fix a pose. ``stop(R, t)``: a pose that passes but too weakly determined to judge, refined from
+    (R, t), or None (:meth:`Tree.regions`)."""
     tree, left = stand_in_tree(problem, threshold)
     if not tree.fixes_pose:
         return Regions(complete=False, reason="the point and ball touches and the sensors' stand-ins do not fix a pose",
                        left=left)
-    found = tree.regions(partial=left > 0)
+    found = tree.regions(partial=left > 0, stop=stop)
     found.left = left
     return found
 
@@ -184,9 +196,9 @@ class Tree:
         self.round = ~self.flat
         # Each touch's patch box, grown by how far a touch that passes may lie off its patch: the patch's
         # tolerance and widening, its distance off the surface, a ball's radius.
+        self.patch_low, self.patch_high = np.array([box[0] for box in boxes]), np.array([box[1] for box in boxes])
         grow = patch_growth(self.root, self.dev, self.offset)
-        self.low = np.array([box[0] for box in boxes]) - grow[:, None]
-        self.high = np.array([box[1] for box in boxes]) + grow[:, None]
+        self.low, self.high = self.patch_low - grow[:, None], self.patch_high + grow[:, None]
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
@@ -556,10 +568,11 @@ class Tree:
 
     # --- the search ----------------------------------------------------------------------------------------
 
-    def leaves(self, v, w, ylo, yhi, fraction, kept, budget=None):
+    def leaves(self, v, w, ylo, yhi, fraction, kept, budget=None, stop=None):
         """The leaf cells (:class:`Cells`) grown from the given cells: split until their model's remainder is at
         most ``fraction sqrt(T)``; the cells kept per level are added to ``kept``. None when the search stops
-        (past ``MAX_CELLS`` or ``MAX_LEVELS``, or more than ``budget`` cells kept in all), with the reason."""
+        (past ``MAX_CELLS`` or ``MAX_LEVELS``, or more than ``budget`` cells kept in all), with the reason.
+        ``stop``: see :meth:`regions`; tried on the best cell of a level that keeps more than ``WEAK_TRY_CELLS``."""
         done = []
         for _ in range(MAX_LEVELS):
             # The cheap zeroth-order bound first; the first-order model only for the cells it keeps.
@@ -567,6 +580,14 @@ class Tree:
             c = self.first_bound(c.take((c.zeroth <= self.root**2) & ~beyond_pi(c.v, c.w)))
             c = c.take(c.bound <= self.root**2)
             kept.append(len(c.v))
+            if stop is not None and len(c.v) > WEAK_TRY_CELLS and self.tries > 0:
+                # The cell whose model's least pose fits best, its touches on their patches.
+                R, y = self.leaf_poses(c)[:2]
+                x = np.einsum("kji,nj->kni", R, self.points - self.centroid) + y[:, None]
+                off = np.maximum(self.patch_low - x, 0.0) + np.maximum(x - self.patch_high, 0.0)
+                k = np.argmin(np.sum(self.distances(x, np.zeros_like(y))[0] ** 2 + np.sum(off**2, axis=2), axis=1))
+                self.tries -= 1
+                self.try_weak(stop, R[k], self.centroid - R[k] @ y[k])
             if budget is not None and sum(kept) > budget:
                 return None, f"more than {budget} cells with sensors' rows left out: the rest leave the pose weak"
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
@@ -589,15 +610,37 @@ class Tree:
             ylo, yhi = np.concatenate([ylo, c.ylo[narrow]]), np.concatenate([yhi, c.yhi[narrow]])
         return None, f"cells still wider than a leaf after {MAX_LEVELS} levels"
 
-    def regions(self, start=None, partial=False):
+    def regions(self, start=None, partial=False, stop=None):
         """:class:`Regions` over the cells ``start`` (v, w, ylo, yhi; the y boxes on the fixture frame's axes),
         or over every rotation and image. ``partial``: sensors' rows are left out, which may narrow what the rows
         searched leave wide: a region whose pose passes is settled however wide (splitting it finer would not
-        narrow it), and the search stops past ``PARTIAL_CELLS`` cells (the rows searched leave the pose weak)."""
+        narrow it), and the search stops past ``PARTIAL_CELLS`` cells (the rows searched leave the pose weak).
+
+        ``stop(R, t)``: the pose refined from (R, t) when it passes but the touches determine it too weakly to
+        judge, else None. Such a pose makes the answer underdetermined whatever else passes, so where a valley of
+        poses keeps many cells its best pose is tried, and so is a region that passes wider than a patch's
+        widening (``WEAK_TRIES`` times each at most); the search stops at the first weak one (``weak``, not
+        complete)."""
         kept = []
+        self.tries = self.region_tries = WEAK_TRIES if stop is not None else 0
+        try:
+            return self._regions(start, partial, stop, kept)
+        except WeakPose as weak:
+            return Regions([weak.pose], [0.0], complete=False, cells=kept, weak=True,
+                           reason="stopped at a pose that passes but that the touches determine too weakly to judge")
+
+    @staticmethod
+    def try_weak(stop, R, t):
+        """Raise :class:`WeakPose` when ``stop`` calls the pose (R, t) weak."""
+        pose = stop(R, t)
+        if pose is not None:
+            raise WeakPose(pose)
+
+    def _regions(self, start, partial, stop, kept):
+        """:meth:`regions`' search."""
         start = first_cells() if start is None else (start[0], start[1], *self.turned(start[2], start[3], self.Q))
         budget = PARTIAL_CELLS if partial else None
-        leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget)
+        leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget, stop)
         if leaves is None:
             return Regions(complete=False, reason=reason, cells=kept)
         fraction = LEAF_FRACTION
@@ -613,11 +656,16 @@ class Tree:
                          if not region.passes or (region.extent_mm > SETTLED_MM and not fine and not partial)]
             if not unsettled:
                 return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept)
+            # Regions that pass but reach farther than a patch's widening may be a weak pose's valley.
+            wide = [k for k in unsettled if found[k].passes and found[k].extent_mm > EXTENT_WIDENING_MAX_MM]
+            for k in wide[:self.region_tries]:
+                self.region_tries -= 1
+                self.try_weak(stop, *found[k].pose)
             fraction /= 4.0
             members = np.concatenate([found[k].members for k in unsettled])
             settled = leaves.take(~np.isin(np.arange(len(leaves.v)), members))
             finer, reason = self.leaves(leaves.v[members], leaves.w[members], leaves.ylo[members],
-                                        leaves.yhi[members], fraction, kept, budget)
+                                        leaves.yhi[members], fraction, kept, budget, stop)
             if finer is None:
                 break
             leaves = Cells.joined([settled, finer])

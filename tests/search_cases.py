@@ -206,7 +206,7 @@ class Outcome:
     """What the engine said on one layout and what it got wrong (see the module doc)."""
 
     status: str
-    found: int  # admissible poses the brute force finds
+    found: int  # admissible poses the brute force finds (-1: not run, the engine claimed no pose)
     search: str = "complete"
     wrong_unique: bool = False
     unique_missed: bool = False
@@ -265,6 +265,10 @@ def judge(case, noise_mm, index, timed=False):
         clock = time.process_time()
         register_touches(lay.features, given, nominal, **kwargs)
         seconds["engine, nominal pose"] = time.process_time() - clock
+    status = result["status"]
+    if result["search"] != "complete" or status == "underdetermined":
+        # No pose claimed (exit 6 or 4): nothing for the brute force to judge, counted apart.
+        return Outcome(status, -1, result["search"], seconds=seconds)
     clock = time.process_time()
     found = admissible_poses(lay.features, lay.touches, lay.contacts, noise_mm, lay.truth, seed=index,
                              unlabelled=case.unlabelled)
@@ -278,10 +282,7 @@ def judge(case, noise_mm, index, timed=False):
     def close(a, b):
         return displacement_mm(np.asarray(a), np.asarray(b), points) <= tolerance
 
-    status = result["status"]
     out = Outcome(status, len(found), result["search"], seconds=seconds)
-    if result["search"] != "complete":
-        return out  # a search that says it is not complete claims nothing (exit code 6): counted apart
     listed = [s["pose"] for s in result["solutions"]]
     if status == "unique":
         out.wrong_unique = not close(result["pose"], lay.truth)

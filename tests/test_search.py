@@ -349,7 +349,26 @@ def test_a_pose_the_search_did_not_find_makes_it_incomplete(monkeypatch):
 
     features, touches, _, _ = _layout("cube", None, np.random.default_rng(4))
     assert register_touches(features, touches)["search"] == "complete"
-    monkeypatch.setattr(solve, "search", lambda problem, threshold: Regions())
+    monkeypatch.setattr(solve, "search", lambda problem, threshold, stop=None: Regions())
     result = register_touches(features, touches)
     assert result["status"] == "unique" and result["search"] == "incomplete"
     assert "did not find" in result["search_reason"] and exit_code(result) == 6
+
+
+def test_a_weak_pose_stops_the_search(monkeypatch):
+    """A pose that passes on its patches but that the touches determine too weakly to judge makes the answer
+    `underdetermined` whatever else passes: the search stops at it (exit 4, no pose claimed, the reason named),
+    and the same search run to its end says `underdetermined` too. (A printed inclined plane's 2 + 4 layout,
+    noise-free, whose touches leave a screw motion weak.)"""
+    from fixturecad.registration import solve
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.touchfile import exit_code
+    from search_cases import CASES, layout
+
+    lay = layout(next(c for c in CASES if c.name == "inclined-plane-cylinder 2+4, printed"), 0.0, 2)
+    result = register_touches(lay.features, lay.touches, tolerance=lay.tolerance)
+    assert result["status"] == "underdetermined" and result["search"] == "incomplete"
+    assert "too weakly" in result["search_reason"] and exit_code(result) == 4 and result["free_motions"]
+    monkeypatch.setattr(solve, "search", lambda problem, threshold, stop=None: search(problem, threshold))
+    full = register_touches(lay.features, lay.touches, tolerance=lay.tolerance)
+    assert full["status"] == "underdetermined" and full["search"] == "complete"
