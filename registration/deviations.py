@@ -13,6 +13,8 @@ This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 
+import copy
+
 import numpy as np
 
 from .datums import frame_change
@@ -32,11 +34,11 @@ class FixtureTolerance:
     ``zone_mm`` the profile tolerance zone width; or, for an as-built part,
     ``covariances`` dict id -> (k, k) covariance of every feature's mode
     coordinates from its calibration, already in the datum frame.
-    ``widened``: (feature id, mode index) pairs let free (their zone
-    ``FREED_ZONE_MM``), to test whether one of them explains the touches.
+    :meth:`widened` lets one mode free (its zone ``FREED_ZONE_MM``), to test
+    whether it explains the touches.
     """
 
-    def __init__(self, features, scheme, zone_mm, covariances=None, widened=()):
+    def __init__(self, features, scheme, zone_mm, covariances=None):
         if not (zone_mm >= 0 and np.isfinite(zone_mm)):
             raise ValueError(f"the fixture tolerance must be a non-negative number of mm, got {zone_mm}")
         scheme.check(features)
@@ -50,21 +52,25 @@ class FixtureTolerance:
             start += len(m.names)
         self.size = start
         self.projection = self._gauge_projection()
-        if covariances is None:
-            prior = np.zeros((start, start))
+        self._given = covariances
+        self._covariance(())
+
+    def _covariance(self, widened):
+        """Fill ``covariance`` and its ``root``, the modes ``widened`` let free."""
+        if self._given is None:
+            prior = np.zeros((self.size, self.size))
             for fid, m in self.modes.items():
-                zones = [FREED_ZONE_MM if (fid, k) in widened else zone_mm for k in range(len(m.names))]
+                zones = [FREED_ZONE_MM if (fid, k) in widened else self.zone_mm for k in range(len(m.names))]
                 prior[self.slices[fid], self.slices[fid]] = np.diag((m.sigma(1.0) * zones) ** 2)
             self.covariance = self.projection @ prior @ self.projection.T
         else:
             # A calibration states its covariances in the datum frame already.
-            self.covariance = np.zeros((start, start))
+            self.covariance = np.zeros((self.size, self.size))
             for fid, s in self.slices.items():
-                self.covariance[s, s] = np.asarray(covariances[fid], float)
+                self.covariance[s, s] = np.asarray(self._given[fid], float)
                 freed = [k for k in range(s.stop - s.start) if (fid, k) in widened]
                 self.covariance[s.start + np.array(freed, int), s.start + np.array(freed, int)] += \
                     self.modes[fid].sigma(FREED_ZONE_MM)[freed] ** 2
-        self._given = covariances
         # S = root root^T over the modes the prior does not pin (S is singular: the gauge is projected out).
         eigen, vectors = np.linalg.eigh(self.covariance)
         kept = eigen > ROOT_CUTOFF * max(eigen.max(initial=0.0), 1e-300)
@@ -80,8 +86,10 @@ class FixtureTolerance:
         return float(np.sqrt(np.max(np.diag(self.covariance)[mm], initial=0.0)))
 
     def widened(self, fid, mode):
-        """The same tolerance with one mode (index) of feature ``fid`` let free."""
-        return FixtureTolerance(self.features, self.scheme, self.zone_mm, self._given, ((fid, mode),))
+        """The same tolerance with one mode (index) of feature ``fid`` let free (its modes and gauge shared)."""
+        other = copy.copy(self)
+        other._covariance(((fid, mode),))
+        return other
 
     def _gauge_projection(self):
         """P (K, K): mode coordinates of the printed part -> the same seen from its datum frame.
