@@ -410,6 +410,7 @@ def plot_errors(records, summary, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.ticker import MaxNLocator
 
     assigned = [pair for r in records for pair in r.get("assigned", ())]
     fig, axes = plt.subplots(1, 3 if assigned else 2, figsize=(15, 4.6) if assigned else (10, 4))
@@ -424,6 +425,7 @@ def plot_errors(records, summary, path: Path) -> None:
         ax.axvline(summary[rms] * scale, color="tab:blue", linestyle="--", label="observed RMS")
         ax.set_xlabel(label)
         ax.set_ylabel("trials")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of trials
         ax.legend()
     if assigned:
         _plot_assignment(axes[2], assigned)
