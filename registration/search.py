@@ -96,15 +96,15 @@ class Regions:
     reason: str = ""
     cells: list = field(default_factory=list)
     left: int = 0
-    weak: bool = False  # stopped at the pose (the first of ``poses``) that ``stop`` called too weak to judge
+    weak: object = None  # what ``stop`` returned where the search stopped (a pose too weak to judge)
 
 
 class WeakPose(Exception):
-    """The search's ``stop`` called a pose too weakly determined to judge: ``pose`` (R, t)."""
+    """The search's ``stop`` called a pose too weakly determined to judge: ``found``, what it returned."""
 
-    def __init__(self, pose):
+    def __init__(self, found):
         super().__init__()
-        self.pose = pose
+        self.found = found
 
 
 def threshold_mm2(problem):
@@ -616,8 +616,8 @@ class Tree:
         searched leave wide: a region whose pose passes is settled however wide (splitting it finer would not
         narrow it), and the search stops past ``PARTIAL_CELLS`` cells (the rows searched leave the pose weak).
 
-        ``stop(R, t)``: the pose refined from (R, t) when it passes but the touches determine it too weakly to
-        judge, else None. Such a pose makes the answer underdetermined whatever else passes, so where a valley of
+        ``stop(R, t)``: what it finds from (R, t) when a pose refined from it passes but the touches determine it
+        too weakly to judge, else None. Such a pose makes the answer underdetermined whatever else passes, so where a valley of
         poses keeps many cells its best pose is tried, and so is a region that passes wider than a patch's
         widening (``WEAK_TRIES`` times each at most); the search stops at the first weak one (``weak``, not
         complete)."""
@@ -626,15 +626,15 @@ class Tree:
         try:
             return self._regions(start, partial, stop, kept)
         except WeakPose as weak:
-            return Regions([weak.pose], [0.0], complete=False, cells=kept, weak=True,
+            return Regions(complete=False, cells=kept, weak=weak.found,
                            reason="stopped at a pose that passes but that the touches determine too weakly to judge")
 
     @staticmethod
     def try_weak(stop, R, t):
         """Raise :class:`WeakPose` when ``stop`` calls the pose (R, t) weak."""
-        pose = stop(R, t)
-        if pose is not None:
-            raise WeakPose(pose)
+        found = stop(R, t)
+        if found is not None:
+            raise WeakPose(found)
 
     def _regions(self, start, partial, stop, kept):
         """:meth:`regions`' search."""

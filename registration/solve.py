@@ -45,7 +45,7 @@ def solve(problem, initial_pose=None, complete=True, found=None):
     closed-form starts only (the explanations' quick refits).
     """
     solutions = Solutions()
-    starts, extents = [], []
+    starts, extents, weak = [], [], None
     if initial_pose is not None:
         T = check_fixture2meas(initial_pose)
         starts, solutions.search = [(T[:3, :3], T[:3, 3])], "nominal"
@@ -54,9 +54,10 @@ def solve(problem, initial_pose=None, complete=True, found=None):
         starts, extents, solutions.cells = found.poses, found.extents_mm, found.cells
         solutions.search = "complete" if found.complete else "incomplete"
         solutions.reason = found.reason
-        if found.weak:
-            extents = []  # the pose it stopped at: no region about it
-    if initial_pose is None and not ((solutions.complete or (complete and found.weak)) and starts):
+        weak = found.weak
+        if weak is not None:
+            solutions.append(weak)  # the pose the search stopped at, refined and judged: the answer stands on it
+    if initial_pose is None and weak is None and not (solutions.complete and starts):
         # The closed-form starts: where the search did not complete, or found that no pose passes (then the
         # best fits, for what the verdict says of them).
         starts = starts + best_starts(problem, initial_poses(problem))[0][:LOCAL_STARTS]
@@ -91,13 +92,14 @@ def solve(problem, initial_pose=None, complete=True, found=None):
 
 
 def _weak_stop(problem):
-    """The search's ``stop``: the pose refined from (R, t) when it passes, on its patches, with rank 6 but too
-    weakly determined to judge (the verdict's ``weak``), else None. One such pose makes the answer
-    underdetermined (:func:`.engine.register_touches`), whatever else passes: no further search can change it."""
+    """The search's ``stop``: the :class:`.verdict.Solution` refined from (R, t) when it passes, on its patches,
+    with rank 6 but too weakly determined to judge (the verdict's ``weak``), else None. One such pose makes the
+    answer underdetermined (:func:`.engine.register_touches`), whatever else passes: no further search can
+    change it."""
     def stop(R, t):
         R, t, r, J = levenberg_marquardt(problem, R, t)
         s = judged(problem, Solution(R, t, r, J), problem.scale())
-        return (R, t) if s.passes and s.admissible and s.rank == 6 and s.weak else None
+        return s if s.passes and s.admissible and s.rank == 6 and s.weak else None
     return stop
 
 

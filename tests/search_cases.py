@@ -10,6 +10,8 @@ on each axis. The judge (:func:`judge`) runs the engine and the brute force
 * ``unique_none``: ``unique`` although the brute force finds no admissible pose at all;
 * ``ambiguous_missing``: ``ambiguous`` without one of the brute force's poses in ``solutions``;
 * ``false_inconsistent``: ``inconsistent`` although the brute force finds an admissible pose;
+* ``false_underdetermined``: ``underdetermined`` on an exact part although the touches plainly fix the
+  pose (:func:`_plainly_determined`; the brute force runs only then, and not on a stopped search);
 * ``separating``: on ``ambiguous``, whether the separating touch lies on the real part (probed where
   it says, the probe moving along the feature's normal at the true pose) and, added, gives
   ``unique`` at the true pose.
@@ -28,6 +30,7 @@ import numpy as np
 
 from brute_force import PATCH_TOLERANCE_MM, TouchResiduals, admissible_poses, random_rotations, rotations
 from fixturecad.build import features_document
+from fixturecad.registration.defaults import DEFAULT_SIGMA_MM
 from fixturecad.registration.deviations import tolerance_from_document
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.features import features_from_json
@@ -42,6 +45,7 @@ EXACT_TOLERANCE_MM = 0.01  # ... or this far, noise-free
 TRUE_POSE_RANGE_MM = 100.0  # true fixture origins are uniform in this cube about the measurement origin
 NOMINAL_TWIST = np.concatenate([np.radians(5.0) * np.array([0.6, 0.0, 0.8]), [3.0, 4.0, 0.0]])  # rad, mm
 DISPLACEMENT_POINTS = 400  # patch points over which two poses are compared
+PLAIN_SPREAD_MM = 1.0 / 30.0  # a pose determined this well (each touch's standard deviation) is not weak
 BOSSES = "{C-R-C}" * 6  # a design of six bosses (line sensors in its plan; touched here by a point probe)
 
 
@@ -213,6 +217,7 @@ class Outcome:
     unique_none: bool = False
     ambiguous_missing: bool = False
     false_inconsistent: bool = False
+    false_underdetermined: bool = False
     separating: str = ""  # "", "separates", "missing", "off the part", "does not separate"
     seconds: dict = field(default_factory=dict)  # CPU s: engine, brute force and (timed) engine with a nominal pose
 
@@ -266,9 +271,12 @@ def judge(case, noise_mm, index, timed=False):
         register_touches(lay.features, given, nominal, **kwargs)
         seconds["engine, nominal pose"] = time.process_time() - clock
     status = result["status"]
-    if result["search"] != "complete" or status == "underdetermined":
-        # No pose claimed (exit 6 or 4): nothing for the brute force to judge, counted apart.
-        return Outcome(status, -1, result["search"], seconds=seconds)
+    if status == "underdetermined":
+        # No pose claimed (exit 4), but not where the touches plainly fix the pose (below).
+        return Outcome(status, -1, result["search"], seconds=seconds,
+                       false_underdetermined=_plainly_determined(case, lay, noise_mm, index))
+    if result["search"] != "complete":
+        return Outcome(status, -1, result["search"], seconds=seconds)  # no claim (exit 6): counted apart
     clock = time.process_time()
     found = admissible_poses(lay.features, lay.touches, lay.contacts, noise_mm, lay.truth, seed=index,
                              unlabelled=case.unlabelled)
@@ -296,6 +304,23 @@ def judge(case, noise_mm, index, timed=False):
     elif status == "inconsistent":
         out.false_inconsistent = bool(found)
     return out
+
+
+def _plainly_determined(case, lay, noise_mm, index):
+    """Whether the touches plainly fix the pose on an exact part: at the true pose each touch's place on the
+    fixture has a standard deviation under ``PLAIN_SPREAD_MM`` (the touch-noise Cramer-Rao bound, at the
+    engine's default sigma when noise-free), and the brute force finds one admissible pose. The engine's
+    line for too weak to judge is ten times that (1 mm at three standard deviations). Printed parts are not
+    judged: their deviations widen the spread beyond this model."""
+    if case.printed:
+        return False
+    problem = TouchResiduals(lay.features, lay.touches, lay.contacts)
+    R, t = lay.truth[:3, :3], lay.truth[:3, 3]
+    points = (np.vstack(list(lay.touches.values())) - t) @ R
+    if spread_mm(problem, lay.truth, noise_mm or DEFAULT_SIGMA_MM, points) >= PLAIN_SPREAD_MM:
+        return False
+    return len(admissible_poses(lay.features, lay.touches, lay.contacts, noise_mm, lay.truth, seed=index,
+                                unlabelled=case.unlabelled)) == 1
 
 
 def _separating(lay, given, result, kwargs, noise_mm, index, close):

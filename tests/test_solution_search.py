@@ -16,6 +16,7 @@ CHECKS = {
     "unique with a wrong pose": ("wrong_unique",),
     "an admissible pose missed": ("unique_missed", "unique_none", "ambiguous_missing"),
     "inconsistent although an admissible pose passes": ("false_inconsistent",),
+    "underdetermined although the touches plainly fix the pose": ("false_underdetermined",),
 }
 
 
