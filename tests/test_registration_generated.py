@@ -246,5 +246,5 @@ def test_register_py_embeds_every_module_its_modules_import():
                 assert node.module in EMBEDDED_MODULES, (name, node.module)
             if isinstance(node, ast.Import) or (isinstance(node, ast.ImportFrom) and node.level == 0):
                 top = (node.module if isinstance(node, ast.ImportFrom) else node.names[0].name).split(".")[0]
-                assert top in ("numpy", "scipy", "math", "dataclasses", "functools", "itertools", "argparse", "csv", "io",
+                assert top in ("numpy", "scipy", "copy", "math", "dataclasses", "functools", "itertools", "argparse", "csv", "io",
                                "json", "os", "reprlib", "sys", "warnings"), (name, top)
