@@ -43,7 +43,9 @@ from its cheapest leaves, and its *extent* (mm, from each leaf's model
 ellipsoid) bounds how far any pose of it that passes puts a touch from where
 that pose does; a region is split finer until its pose passes and its extent
 is small, or is dropped when its pose fails by more than its extent can make
-up (:meth:`Tree.regions`).
+up (:meth:`Tree.regions`). A search given a ``stop`` ends at the first pose it
+meets that passes but is too weakly determined to judge: that pose alone
+makes the answer underdetermined.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
@@ -77,7 +79,7 @@ SETTLED_MM = 0.05  # ... a region being settled when its pose passes and its ext
 RANK_ROTATIONS = np.array([[0.0, 0.0, 0.0], [0.9, -0.4, 0.3], [-0.5, 1.1, 0.7]])  # rad
 NARROW_ANGLE = 4.0  # rad: a cell whose rotation vectors are shorter than this is narrowed to its model's ellipsoid ...
 NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
-WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses) tries its best cell's pose on ``stop`` ...
+WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses) tries its best pose on ``stop`` ...
 WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions' poses that pass
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
@@ -617,10 +619,10 @@ class Tree:
         narrow it), and the search stops past ``PARTIAL_CELLS`` cells (the rows searched leave the pose weak).
 
         ``stop(R, t)``: what it finds from (R, t) when a pose refined from it passes but the touches determine it
-        too weakly to judge, else None. Such a pose makes the answer underdetermined whatever else passes, so where a valley of
-        poses keeps many cells its best pose is tried, and so is a region that passes wider than a patch's
-        widening (``WEAK_TRIES`` times each at most); the search stops at the first weak one (``weak``, not
-        complete)."""
+        too weakly to judge, else None. Such a pose makes the answer underdetermined whatever else passes, so
+        where a valley of poses keeps many cells its best pose is tried, and so is a region that passes wider
+        than a patch's widening (``WEAK_TRIES`` times each at most); the search stops at the first weak one
+        (``weak``, not complete)."""
         kept = []
         self.tries = self.region_tries = WEAK_TRIES if stop is not None else 0
         try:
