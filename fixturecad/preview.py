@@ -14,6 +14,8 @@ SENSOR_COLOUR = "#444444"
 SUBDIVISION = 15  # triangles longer than size / this are split, so depth sorting works on big flat faces
 FRAME_AXIS_FRACTION = 0.3  # length of the drawn frame axes, as a fraction of the half size of the view
 VIEWS = ((28.0, -60.0), (-28.0, 120.0))  # (elevation, azimuth) deg: front-top and back-bottom
+TABLE_CHAR_IN = 0.07  # width of a character of the plan's table (8 pt monospace), inches
+TABLE_MARGIN_IN = 0.9  # room beside the table for the views' axis labels, inches
 
 
 def feature_colours(ids) -> dict:
@@ -181,10 +183,15 @@ def render(data: dict, path) -> None:
     max_edge = (high - low).max() / SUBDIVISION
     light = np.array([0.4, -0.5, 0.75]) / np.linalg.norm([0.4, -0.5, 0.75])
 
-    figure = Figure(figsize=(13, 6.5), dpi=100)
+    listing = "\n".join([f"{data.get('plan', 'default')} touch plan"] + [t["text"] for t in data["touches"]]) \
+        if data["touches"] else ""
+    # The plan's table in a column of its own between the views, wide enough for its longest line.
+    table_in = max(map(len, listing.splitlines()), default=0) * TABLE_CHAR_IN + TABLE_MARGIN_IN if listing else 0.0
+    figure = Figure(figsize=(13 + table_in, 6.5), dpi=100)
     FigureCanvasAgg(figure)
+    grid = figure.add_gridspec(1, 3, width_ratios=(6.5, max(table_in, 1e-3), 6.5), wspace=0.0)
     for panel, (elev, azim) in enumerate(data.get("views", VIEWS)):
-        ax = figure.add_subplot(1, 2, panel + 1, projection="3d")
+        ax = figure.add_subplot(grid[0, 2 * panel], projection="3d")
         e, a = np.radians(elev), np.radians(azim)
         camera = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
 
@@ -247,13 +254,12 @@ def render(data: dict, path) -> None:
                           label="fixture frame: origin, X Y Z"))
     if data.get("sensors"):
         handles.append(Line2D([], [], linestyle="--", color=SENSOR_COLOUR, label="plane / line sensor"))
-    if data["touches"]:
-        listing = f"{data.get('plan', 'default')} touch plan\n" + "\n".join(t["text"] for t in data["touches"])
+    if listing:
         figure.text(0.5, 0.88, listing, ha="center", va="top", multialignment="left", fontsize=8, family="monospace",
                     bbox={"facecolor": "white", "edgecolor": "#888888", "alpha": 0.85})
     figure.legend(handles=handles, loc="lower center", ncol=(len(handles) + 1) // 2, fontsize=9, frameon=False)
     figure.suptitle(data["title"], fontsize=11)
-    figure.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.1, wspace=0.05)
+    figure.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.1)
     figure.savefig(path)
 
 
