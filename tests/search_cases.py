@@ -11,7 +11,8 @@ on each axis. The judge (:func:`judge`) runs the engine and the brute force
 * ``ambiguous_missing``: ``ambiguous`` without one of the brute force's poses in ``solutions``;
 * ``false_inconsistent``: ``inconsistent`` although the brute force finds an admissible pose;
 * ``false_underdetermined``: ``underdetermined`` on an exact part although the touches plainly fix the
-  pose (:func:`_plainly_determined`; the brute force runs only then, and not on a stopped search);
+  pose (:func:`_plainly_determined`; its brute force runs only where the spread is that small). The brute
+  force runs for the other checks only where the engine claims a pose;
 * ``separating``: on ``ambiguous``, whether the separating touch lies on the real part (probed where
   it says, the probe moving along the feature's normal at the true pose) and, added, gives
   ``unique`` at the true pose.
