@@ -60,7 +60,7 @@ def explanations(problem, features, solutions, initial_pose=None):
 def _fits(problem, initial_pose):
     """Every admissible rank-6 pose passing the residual test, solved from scratch."""
     # The closed-form starts only: a complete search for every touch left out costs seconds.
-    return [s for s in solve(problem, initial_pose, complete=False) if s.passes and s.admissible and s.rank == 6]
+    return [s for s in solve(problem, initial_pose, complete=False) if s.good]
 
 
 def _robust_pose(problem, R, t, iterations=5):
@@ -79,8 +79,7 @@ def _fits_from(problem, starts):
     for R, t in starts:
         R, t, r, J = levenberg_marquardt(problem, R, t)
         solution = judged(problem, Solution(R, t, r, J), length)
-        if (solution.passes and solution.admissible and solution.rank == 6
-                and not any(same_pose((R, t), (s.rotation, s.translation)) for s in found)):
+        if solution.good and not any(same_pose((R, t), (s.rotation, s.translation)) for s in found):
             found.append(solution)
     return found
 
@@ -117,7 +116,7 @@ def features_beyond_tolerance(problem, solutions, starts=4):
             for solution in solutions[:starts]:
                 R, t, r, J = levenberg_marquardt(freed, solution.rotation, solution.translation)
                 refit = judged(freed, Solution(R, t, r, J), length)
-                if refit.passes and refit.admissible and refit.rank == 6:
+                if refit.good:
                     break
             else:
                 continue

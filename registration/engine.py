@@ -113,7 +113,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             s.assignment, s.problem = assignment, problem
     best = solutions[0]
     result = {"flagged": [], "culprit": None, "fixture_flagged": [], "free_motions": [], "separating_touch": None}
-    good = [s for s in solutions if s.passes and s.admissible and s.rank == 6]
+    good = [s for s in solutions if s.good]
     checked = None  # the answer judged with all touches, when it comes from a refit without one
     if best.rank < 6:
         status = "underdetermined"
@@ -207,7 +207,7 @@ def _missed(problem, explained):
     """The distinct poses the explanations lead to that, refined with every touch, pass: ones the search missed."""
     refined = [judged(problem, Solution(*levenberg_marquardt(problem, s.rotation, s.translation)), problem.scale())
                for _, _, s, _ in explained]
-    return _distinct([s for s in refined if s.passes and s.admissible and s.rank == 6])
+    return _distinct([s for s in refined if s.good])
 
 
 def _distinct(solutions):

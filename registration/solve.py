@@ -75,7 +75,7 @@ def solve(problem, initial_pose=None, complete=True, found=None):
             solution.wide = reach[-1] > EXTENT_WIDENING_MAX_MM
         solutions.append(solution)
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
-    if solutions.complete and not extents and any(s.passes and s.admissible and s.rank == 6 for s in solutions):
+    if solutions.complete and not extents and any(s.good for s in solutions):
         # The search left no region, yet a start's pose passes: the search missed it, and may have missed more.
         solutions.search, solutions.reason = "incomplete", "a pose passes that the search did not find"
     if solutions.complete:
@@ -99,7 +99,7 @@ def _weak_stop(problem):
     def stop(R, t):
         R, t, r, J = levenberg_marquardt(problem, R, t)
         s = judged(problem, Solution(R, t, r, J), problem.scale())
-        return s if s.passes and s.admissible and s.rank == 6 and s.weak else None
+        return s if s.good and s.weak else None
     return stop
 
 
@@ -119,10 +119,9 @@ def told_apart(solutions, sigma):
     for name in ("search", "reason", "extent_mm", "cells"):
         setattr(kept, name, getattr(solutions, name))
     for s in solutions:
-        if s.passes and s.admissible and s.rank == 6 and any(
-                k.passes and k.admissible and k.rank == 6 and mahalanobis(
-                    k.rotation, k.translation, k.jacobian.T @ k.jacobian / sigma**2,
-                    s.rotation[None], s.translation[None])[0] < SAME_POSE_CHI2
+        if s.good and any(
+                k.good and mahalanobis(k.rotation, k.translation, k.jacobian.T @ k.jacobian / sigma**2,
+                                       s.rotation[None], s.translation[None])[0] < SAME_POSE_CHI2
                 for k in kept):
             continue
         kept.append(s)

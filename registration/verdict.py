@@ -46,6 +46,11 @@ class Solution:
     wide: bool = False  # from a region of poses that may pass reaching farther than the patches' widening
 
     @property
+    def good(self):
+        """A pose the verdict counts: it passes the residual test, its touches on their patches, at rank 6."""
+        return self.passes and self.admissible and self.rank == 6
+
+    @property
     def weak(self):
         """Determined, but too poorly to judge its touches on their patches."""
         return self.rank == 6 and self.spread_mm > EXTENT_WIDENING_MAX_MM
