@@ -109,6 +109,20 @@ class WeakPose(Exception):
         self.found = found
 
 
+class Tries:
+    """A search's ``stop`` (:meth:`Tree.regions`), tried at most ``left`` times: a call raises
+    :class:`WeakPose` when it calls the pose weak."""
+
+    def __init__(self, stop, left):
+        self.stop, self.left = stop, left if stop is not None else 0
+
+    def __call__(self, R, t):
+        self.left -= 1
+        found = self.stop(R, t)
+        if found is not None:
+            raise WeakPose(found)
+
+
 def threshold_mm2(problem):
     """The residual test's largest cost (mm^2) of a pose at which the rows have rank 6."""
     return problem.sigma**2 * chi_square_quantile(CHI2_CONFIDENCE, max(problem.size - 6, 1))
@@ -570,11 +584,11 @@ class Tree:
 
     # --- the search ----------------------------------------------------------------------------------------
 
-    def leaves(self, v, w, ylo, yhi, fraction, kept, budget=None, stop=None):
+    def leaves(self, v, w, ylo, yhi, fraction, kept, budget=None, tries=None):
         """The leaf cells (:class:`Cells`) grown from the given cells: split until their model's remainder is at
         most ``fraction sqrt(T)``; the cells kept per level are added to ``kept``. None when the search stops
         (past ``MAX_CELLS`` or ``MAX_LEVELS``, or more than ``budget`` cells kept in all), with the reason.
-        ``stop``: see :meth:`regions`; tried on the best cell of a level that keeps more than ``WEAK_TRY_CELLS``."""
+        ``tries`` (:class:`Tries`): on the best cell of a level that keeps more than ``WEAK_TRY_CELLS``."""
         done = []
         for _ in range(MAX_LEVELS):
             # The cheap zeroth-order bound first; the first-order model only for the cells it keeps.
@@ -582,14 +596,13 @@ class Tree:
             c = self.first_bound(c.take((c.zeroth <= self.root**2) & ~beyond_pi(c.v, c.w)))
             c = c.take(c.bound <= self.root**2)
             kept.append(len(c.v))
-            if stop is not None and len(c.v) > WEAK_TRY_CELLS and self.tries > 0:
+            if tries is not None and tries.left > 0 and len(c.v) > WEAK_TRY_CELLS:
                 # The cell whose model's least pose fits best, its touches on their patches.
                 R, y = self.leaf_poses(c)[:2]
                 x = np.einsum("kji,nj->kni", R, self.points - self.centroid) + y[:, None]
                 off = np.maximum(self.patch_low - x, 0.0) + np.maximum(x - self.patch_high, 0.0)
                 k = np.argmin(np.sum(self.distances(x, np.zeros_like(y))[0] ** 2 + np.sum(off**2, axis=2), axis=1))
-                self.tries -= 1
-                self.try_weak(stop, R[k], self.centroid - R[k] @ y[k])
+                tries(R[k], self.centroid - R[k] @ y[k])
             if budget is not None and sum(kept) > budget:
                 return None, f"more than {budget} cells with sensors' rows left out: the rest leave the pose weak"
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
@@ -624,25 +637,17 @@ class Tree:
         than a patch's widening (``WEAK_TRIES`` times each at most); the search stops at the first weak one
         (``weak``, not complete)."""
         kept = []
-        self.tries = self.region_tries = WEAK_TRIES if stop is not None else 0
         try:
-            return self._regions(start, partial, stop, kept)
+            return self._regions(start, partial, Tries(stop, WEAK_TRIES), Tries(stop, WEAK_TRIES), kept)
         except WeakPose as weak:
             return Regions(complete=False, cells=kept, weak=weak.found,
                            reason="stopped at a pose that passes but that the touches determine too weakly to judge")
 
-    @staticmethod
-    def try_weak(stop, R, t):
-        """Raise :class:`WeakPose` when ``stop`` calls the pose (R, t) weak."""
-        found = stop(R, t)
-        if found is not None:
-            raise WeakPose(found)
-
-    def _regions(self, start, partial, stop, kept):
-        """:meth:`regions`' search."""
+    def _regions(self, start, partial, level_tries, region_tries, kept):
+        """:meth:`regions`' search, its stop tried on valleys' cells and on wide regions' poses."""
         start = first_cells() if start is None else (start[0], start[1], *self.turned(start[2], start[3], self.Q))
         budget = PARTIAL_CELLS if partial else None
-        leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget, stop)
+        leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget, level_tries)
         if leaves is None:
             return Regions(complete=False, reason=reason, cells=kept)
         fraction = LEAF_FRACTION
@@ -660,14 +665,13 @@ class Tree:
                 return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept)
             # Regions that pass but reach farther than a patch's widening may be a weak pose's valley.
             wide = [k for k in unsettled if found[k].passes and found[k].extent_mm > EXTENT_WIDENING_MAX_MM]
-            for k in wide[:self.region_tries]:
-                self.region_tries -= 1
-                self.try_weak(stop, *found[k].pose)
+            for k in wide[:region_tries.left]:
+                region_tries(*found[k].pose)
             fraction /= 4.0
             members = np.concatenate([found[k].members for k in unsettled])
             settled = leaves.take(~np.isin(np.arange(len(leaves.v)), members))
             finer, reason = self.leaves(leaves.v[members], leaves.w[members], leaves.ylo[members],
-                                        leaves.yhi[members], fraction, kept, budget, stop)
+                                        leaves.yhi[members], fraction, kept, budget, level_tries)
             if finer is None:
                 break
             leaves = Cells.joined([settled, finer])
