@@ -119,18 +119,21 @@ def staged_folder(target: Path, force: bool = False, kind: str = "drawing", inpu
 
 
 def check_files(folder: Path, names, force: bool) -> Path:
-    """A folder to write the named files into (made if missing); InputError if one exists and not ``force``."""
+    """A folder to write the named files into; InputError if one exists and not ``force``. A missing folder is
+    made only when the first file is written (:func:`staged_file`): an interrupted command leaves none."""
     folder = Path(folder)
     existing = [name for name in names if (folder / name).exists()]
     if existing and not force:
         raise InputError(f"{folder / existing[0]} already exists; pass --force to replace it")
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{folder} is a file, not a folder")
+    parent = next(path for path in (folder, *folder.resolve().parents) if path.exists())
+    if not parent.is_dir():
+        raise InputError(f"{parent} is a file, not a folder: cannot write {folder}")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        tempfile.TemporaryFile(dir=folder).close()  # a folder it cannot write in is refused before the work
+        tempfile.TemporaryFile(dir=parent).close()  # a folder it cannot write in is refused before the work
     except OSError as error:
-        raise write_error(error, f"in {folder}") from None
+        raise write_error(error, f"in {parent}") from None
     return folder
 
 
@@ -139,6 +142,7 @@ def staged_file(path: Path):
     """Yield a temporary path beside ``path`` (same suffix); moved onto ``path`` when the block completes."""
     path = Path(path)
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
     except OSError as error:
         raise write_error(error, path) from None

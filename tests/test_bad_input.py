@@ -372,9 +372,10 @@ def _until_it_catches_sigterm(process):
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("delay", [0.0, 1.0])  # in the imports (trimesh's swallowed Ctrl-C), or in the trials
-def test_an_interrupted_simulate_says_so_and_writes_nothing(cube, signum, delay):
+def test_an_interrupted_simulate_says_so_and_writes_nothing(cube, tmp_path, signum, delay):
+    out = tmp_path / "results" / "simulated"  # made only with its files: an interrupted run leaves no empty folder
     process = subprocess.Popen([sys.executable, "-c", "from fixturecad.cli import main; main()", "simulate", str(cube),
-                                "--trials", "1000"], stderr=subprocess.PIPE, text=True)
+                                "--trials", "1000", "--out", str(out)], stderr=subprocess.PIPE, text=True)
     _until_it_catches_sigterm(process)
     time.sleep(delay)
     process.send_signal(signum)
@@ -385,6 +386,7 @@ def test_an_interrupted_simulate_says_so_and_writes_nothing(cube, signum, delay)
     assert last == "fixturecad: interrupted; nothing was written"
     assert all(line.startswith("simulate: about ") for line in before) and len(before) <= 1
     assert not [p.name for p in cube.iterdir() if "simulation" in p.name]
+    assert not (tmp_path / "results").exists()
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
