@@ -103,7 +103,7 @@ def touch_candidates(features, triangles) -> dict:
 
     features = {f.id: f for f in features}
     points = {}
-    for fid in [fid for fid, f in features.items() if f.kind in planning.SURFACES]:
+    for fid in [fid for fid, f in features.items() if f.surface]:
         try:
             points.update(planning.candidate_points(features, [fid], planning.DEFAULT_MARGIN_MM,
                                                     keep=lambda p, n: reachable(triangles, p, n)))

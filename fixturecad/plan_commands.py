@@ -97,7 +97,7 @@ def plan(
         raise InputError(f"fixture folder {out_dir} does not exist")
     document = features_json.read(out_dir)
     all_features = features_from_json(document)
-    surfaces = [fid for fid, f in all_features.items() if f.kind in planning.SURFACES]
+    surfaces = [fid for fid, f in all_features.items() if f.surface]
     ids = surfaces if features is None else [fid.strip() for fid in features.split(",") if fid.strip()]
     unknown = [fid for fid in ids if fid not in all_features]
     if unknown or not ids:

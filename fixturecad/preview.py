@@ -47,7 +47,7 @@ def fixture_scene(template, features, matches: dict, parts) -> dict:
     """Preview data: tessellated faces tagged with their feature, labels, default touch plan."""
     face_owner = {}
     for feature in features:
-        if feature.kind in ("plane", "sphere", "cylinder"):
+        if feature.surface:
             for index in matches[feature.id]:
                 face_owner[index] = feature.id
     faces = []
@@ -99,7 +99,7 @@ def plan_scene(title, vertices, triangles, features, entries, plan_name, views=V
     centroids = vertices[triangles].mean(axis=1)
     owner = np.full(len(triangles), None, dtype=object)
     for feature in features:
-        if feature.kind in ("plane", "sphere", "cylinder"):
+        if feature.surface:
             on = (np.abs(feature.signed_distance(centroids)) < 0.01 * _span([(None, vertices, None)])) & \
                 feature.contains(centroids, 1e-3)
             owner[on & (owner == None)] = feature.id  # noqa: E711 (elementwise)
@@ -114,7 +114,7 @@ def plan_scene(title, vertices, triangles, features, entries, plan_name, views=V
                             "text": f"{number:>2} {entry['contact']:<10} {entry['feature']}"})
     rows = []
     for feature in features:
-        if feature.kind in ("plane", "sphere", "cylinder") and np.any(owner == feature.id):
+        if feature.surface and np.any(owner == feature.id):
             nodes = centroids[owner == feature.id]
             anchor = _label_place(nodes, [t["point"] for t in touches], 0.15 * _span([(None, vertices, None)]))
             anchor = nodes.mean(axis=0) if anchor is None else anchor
@@ -158,7 +158,7 @@ def _label_normal(feature, anchor, features):
     if feature.kind not in ("line", "point"):
         return feature.normal_at(anchor)[0]
     near = [f.normal_at(anchor)[0] for f in features
-            if f.kind in ("plane", "sphere", "cylinder") and abs(f.signed_distance(anchor)[0]) < 1e-6 and f.contains(anchor)[0]]
+            if f.surface and abs(f.signed_distance(anchor)[0]) < 1e-6 and f.contains(anchor)[0]]
     total = np.sum(near, axis=0) if near else np.zeros(3)
     return total / np.linalg.norm(total) if np.linalg.norm(total) > 1e-9 else None
 

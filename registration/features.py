@@ -179,6 +179,7 @@ class _Feature:
     """
 
     kind = ""
+    surface = False  # a plane, a sphere or a cylinder: a surface a probe touches at a point
 
     @property
     def element(self) -> str:
@@ -237,6 +238,7 @@ class Plane(_Feature):
     extent: Extent = field(default_factory=Extent)
     sensing: str = "mobile"
     kind = "plane"
+    surface = True
 
     def __post_init__(self):
         self.point = check_vector(self.point, "plane point")
@@ -255,6 +257,7 @@ class Sphere(_Feature):
     extent: Extent = field(default_factory=Extent)
     sensing: str = "mobile"
     kind = "sphere"
+    surface = True
 
     def __post_init__(self):
         self.center = check_vector(self.center, "sphere center")
@@ -274,6 +277,7 @@ class Cylinder(_Axial):
     extent: Extent = field(default_factory=Extent)
     sensing: str = "mobile"
     kind = "cylinder"
+    surface = True
 
     def __post_init__(self):
         self.point = check_vector(self.point, "cylinder point")

@@ -37,7 +37,6 @@ from .problem import Problem
 from .touches import build_groups
 
 CRITERIA = ("d", "a", "e")
-SURFACES = ("plane", "sphere", "cylinder")  # the features a probe touches at a point
 DEFAULT_MARGIN_MM = 1.0  # from every patch edge, a point probe's (a ball's: its radius more)
 CANDIDATES_PER_FEATURE = 160  # patch points kept per feature (evenly strided)
 EXCHANGE_PASSES = 4
@@ -74,7 +73,7 @@ def candidate_points(features, ids, margin_mm, keep=None, also=None) -> dict:
     out = {}
     for fid in ids:
         feature = features[fid]
-        if feature.kind not in SURFACES:
+        if not feature.surface:
             raise ValueError(f"feature {fid} is a {feature.kind}: a probe touches planes, spheres and cylinders")
         p = patch_points(feature)
         p = p[feature.contains(p, tol_mm=-margin_mm)]  # at least margin_mm inside the patch

@@ -451,7 +451,7 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
     check_enough(features, touches, contacts, radius)
     points = [*touches.values(), *(np.reshape(c["point"], (1, 3)) for c in contacts if "point" in c)]
     # An unlabelled touch may lie on any surface: its spread is compared with all of them.
-    surfaces = [f.id for f in features.values() if f.kind in ("plane", "sphere", "cylinder")] if None in touches else []
+    surfaces = [f.id for f in features.values() if f.surface] if None in touches else []
     touched = [*(key for key in touches if key is not None), *surfaces, *(c["feature"] for c in contacts)]
     free = touches.pop(None, None)
     approaches.pop(None, None)

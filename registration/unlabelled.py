@@ -46,7 +46,6 @@ from .solve import Solutions, solve, told_apart
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
 
-SURFACES = ("plane", "sphere", "cylinder")  # what an unlabelled touch may lie on
 MAX_ASSIGNMENTS = 4  # a cell whose candidates leave at most this many assignments is searched under each
 MIN_JOINT = 6  # touches with one candidate bounded together (:meth:`Labels.kept`), or searched alone, when at
 # least this many
@@ -86,7 +85,7 @@ def check_unlabelled(points):
 
 
 def _surfaces(features):
-    surfaces = [f for f in features.values() if f.kind in SURFACES]
+    surfaces = [f for f in features.values() if f.surface]  # what an unlabelled touch may lie on
     if not surfaces:
         raise ValueError("an unlabelled touch needs a plane, a sphere or a cylinder to lie on: the fixture has none")
     return surfaces

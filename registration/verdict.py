@@ -144,7 +144,7 @@ def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_
             slack = tolerance + np.minimum([spreads[int(i)] for i in g.index], EXTENT_WIDENING_MAX_MM)
         inside = np.asarray(g.feature.contains(local, slack))
         bad.update(int(i) for i in g.index[~inside])
-        if g.approach is not None and g.feature.kind in ("plane", "sphere", "cylinder"):
+        if g.approach is not None and g.feature.surface:
             outward = g.feature.normal_at(local) @ rotation.T
             away = np.einsum("ij,ij->i", outward, g.approach) > 0.0
             bad.update(int(i) for i in g.index[away & np.all(np.isfinite(g.approach), axis=1)])
