@@ -665,6 +665,7 @@ class Tree:
                 return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept)
             # Regions that pass but reach farther than a patch's widening may be a weak pose's valley.
             wide = [k for k in unsettled if found[k].passes and found[k].extent_mm > EXTENT_WIDENING_MAX_MM]
+            wide.sort(key=lambda k: -found[k].extent_mm)  # the widest first: the likeliest to be weak
             for k in wide[:region_tries.left]:
                 region_tries(*found[k].pose)
             fraction /= 4.0
