@@ -80,7 +80,7 @@ def plan(
     from fixturecad.registration.reach import reachable
     from fixturecad.registration.sampling import read_triangles
     from fixturecad.registration.touchfile import touch_csv
-    from fixturecad.staging import check_files, staged_file
+    from fixturecad.staging import check_files, staged_files
     from fixturecad.theory.catalogue import lookup
 
     if not MIN_TOUCHES <= touches <= MAX_TOUCHES:
@@ -125,20 +125,18 @@ def plan(
     record = {"contact_class": "".join("{" + lookup(e["contact"]).contact_class + "}" for e in entries
                                        for _ in e["points"]),
               "note": note, "ball_radius_mm": radius, "touch_plan": entries}
-    with staged_file(folder / f"{name}.json") as path:
-        path.write_text(json.dumps(record, indent=2) + "\n")
-    with staged_file(folder / f"{name}.csv") as path:
-        path.write_text(touch_csv(entries, name, radius))
-    if preview:
-        from fixturecad.preview import plan_scene, render
+    with staged_files(folder, outputs) as staging:
+        (staging / f"{name}.json").write_text(json.dumps(record, indent=2) + "\n")
+        (staging / f"{name}.csv").write_text(touch_csv(entries, name, radius))
+        if preview:
+            from fixturecad.preview import plan_scene, render
 
-        title = f"{document['template']}: plan {name!r}, {touches} touches, criterion {criterion}"
-        touched = [{**e, "points": (np.array(e["points"]) + radius * np.array(e["approaches"])).tolist()}
-                   for e in entries]  # drawn where the probe touches the surface
-        data = plan_scene(title, triangles.reshape(-1, 3), np.arange(3 * len(triangles)).reshape(-1, 3),
-                          list(all_features.values()), touched, name)
-        with staged_file(folder / f"{name}.png") as path:
-            render(data, path)
+            title = f"{document['template']}: plan {name!r}, {touches} touches, criterion {criterion}"
+            touched = [{**e, "points": (np.array(e["points"]) + radius * np.array(e["approaches"])).tolist()}
+                       for e in entries]  # drawn where the probe touches the surface
+            data = plan_scene(title, triangles.reshape(-1, 3), np.arange(3 * len(triangles)).reshape(-1, 3),
+                              list(all_features.values()), touched, name)
+            render(data, staging / f"{name}.png")
     typer.echo(_report(document, all_features, candidates, chosen, entries, robust, touches))
     typer.echo(f"plan: {folder / f'{name}.json'}\ntouch file to fill in: {folder / f'{name}.csv'}")
 

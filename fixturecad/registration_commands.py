@@ -9,7 +9,7 @@ import typer
 
 from fixturecad import features_json
 from fixturecad.errors import InputError
-from fixturecad.staging import check_files, staged_file
+from fixturecad.staging import check_files, staged_files
 from fixturecad.registration.controllers import FORMATS
 from fixturecad.registration.defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
 from fixturecad.registration.units import UNITS_MM, check_noise
@@ -181,10 +181,9 @@ def simulate(
     summary.update({"trials": trials, "unlabelled": unlabelled, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,
                     "calibrated": tolerance is not None and "calibration" in document})
-    with staged_file(folder / SUMMARY_NAME) as path:
-        path.write_text(json.dumps(summary, indent=2))
-    with staged_file(folder / PLOT_NAME) as path:
-        plot_errors(records, summary, path)
+    with staged_files(folder, (SUMMARY_NAME, PLOT_NAME)) as staging:
+        (staging / SUMMARY_NAME).write_text(json.dumps(summary, indent=2))
+        plot_errors(records, summary, staging / PLOT_NAME)
     typer.echo(format_summary(summary))
     typer.echo(f"plot: {folder / PLOT_NAME}")
 

@@ -1,8 +1,10 @@
 """Output folders written whole or not at all, replacing only what fixturecad wrote.
 
-Every command that writes a folder (``build``, ``calibrate``, ``plan``,
-``design``) fills a temporary folder ``.<name>.<pid>.tmp`` beside the target
-and moves it into place when complete. An interrupted command (Ctrl-C,
+Every command that writes a folder (``build``, ``calibrate``, ``design``)
+fills a temporary folder ``.<name>.<pid>.tmp`` beside the target and moves it
+into place when complete; one that adds files to a folder (``plan``,
+``simulate``) writes them into such a folder inside it and moves them in
+together (:func:`staged_files`). An interrupted command (Ctrl-C,
 SIGTERM) removes its temporary folder and exits with 130 or 143; one left by
 a killed process (its pid no longer running) is removed by the next command
 writing beside it. An
@@ -120,7 +122,7 @@ def staged_folder(target: Path, force: bool = False, kind: str = "drawing", inpu
 
 def check_files(folder: Path, names, force: bool) -> Path:
     """A folder to write the named files into; InputError if one exists and not ``force``. A missing folder is
-    made only when the first file is written (:func:`staged_file`): an interrupted command leaves none."""
+    made only when the files are moved in (:func:`staged_files`): an interrupted command leaves none."""
     folder = Path(folder)
     existing = [name for name in names if (folder / name).exists()]
     if existing and not force:
@@ -138,26 +140,26 @@ def check_files(folder: Path, names, force: bool) -> Path:
 
 
 @contextmanager
-def staged_file(path: Path):
-    """Yield a temporary path beside ``path`` (same suffix); moved onto ``path`` when the block completes."""
-    path = Path(path)
+def staged_files(folder: Path, names):
+    """Yield an empty temporary folder to write the files ``names`` into; moved into ``folder`` (made if
+    missing) together when the block completes. On any error or interruption nothing is left: no file, no
+    folder."""
+    folder = Path(folder)
+    parent = next(path for path in (folder, *folder.resolve().parents) if path.exists())
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent)
+        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
     except OSError as error:
-        raise write_error(error, path) from None
-    os.close(handle)
-    os.chmod(name, 0o666 & ~_umask())  # mkstemp makes it private; the result is an ordinary file
+        raise write_error(error, f"in {parent}") from None
     try:
-        with removing(name):
-            yield Path(name)
-            os.replace(name, path)
+        with removing(staging):
+            yield staging
+            folder.mkdir(parents=True, exist_ok=True)
+            for name in names:
+                os.replace(staging / name, folder / name)
     except OSError as error:
-        Path(name).unlink(missing_ok=True)
-        raise write_error(error, path) from None
-    except BaseException:
-        Path(name).unlink(missing_ok=True)
-        raise
+        raise write_error(error, folder) from None
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _remove_stale(target: Path) -> None:
