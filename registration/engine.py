@@ -165,7 +165,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
                                    best.rank)
     answer = best if best is not None else solutions[0]  # with no answer, what is said of the lowest-cost pose
     for s in [answer, *good]:
-        if not hasattr(s, "assignment"):  # refitted by the explanations, under the best pose's assignment
+        if s.assignment is None:  # refitted by the explanations, under the best pose's assignment
             s.assignment = solutions[0].assignment
     shown = (good or [best]) if best is not None else []
     cov = covariance(answer.jacobian, answer.translation, problem.sigma) if best is not None and answer.rank == 6 else None

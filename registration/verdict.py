@@ -44,6 +44,8 @@ class Solution:
     outside: list = field(default_factory=list)
     spread_mm: float = 0.0  # the largest of the touches' spreads (:func:`touch_spreads`)
     wide: bool = False  # from a region of poses that may pass reaching farther than the patches' widening
+    assignment: object = None  # each unlabelled touch's feature id under this pose (:mod:`.unlabelled`) ...
+    problem: object = None  # ... and the labelled problem it gives; None where a pose was refitted without them
 
     @property
     def good(self):
