@@ -100,7 +100,7 @@ def staged_folder(target: Path, force: bool = False, kind: str = "drawing", inpu
     target = check_target(target, force, kind, inputs)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        _remove_stale(target)
+        _remove_stale(target.parent, target.name)
         staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent))
     except OSError as error:
         raise write_error(error, f"in {target.parent}") from None
@@ -147,6 +147,7 @@ def staged_files(folder: Path, names):
     folder = Path(folder)
     parent = next(path for path in (folder, *folder.resolve().parents) if path.exists())
     try:
+        _remove_stale(parent, folder.name)
         staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
     except OSError as error:
         raise write_error(error, f"in {parent}") from None
@@ -162,10 +163,10 @@ def staged_files(folder: Path, names):
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def _remove_stale(target: Path) -> None:
-    """Remove the temporary folders of ``target`` left by processes that no longer run."""
-    for path in [*target.parent.glob(f".{target.name}.*.tmp"), *target.parent.glob(f".{target.name}.*.old")]:
-        parts = path.name[len(target.name) + 2:].split(".")
+def _remove_stale(where: Path, name: str) -> None:
+    """Remove the temporary folders for ``name`` in ``where`` left by processes that no longer run."""
+    for path in [*where.glob(f".{name}.*.tmp"), *where.glob(f".{name}.*.old")]:
+        parts = path.name[len(name) + 2:].split(".")
         if parts[0].isdigit() and not _running(int(parts[0])):
             shutil.rmtree(path, ignore_errors=True)
 

@@ -3,12 +3,12 @@ its own (with the shipped example files) as a user who opens that page would: no
 outputs. The pages run side by side on the suite's workers."""
 
 import shlex
-
-import pytest
 import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from cli import run
 

@@ -135,6 +135,10 @@ def test_simulate_writes_where_out_says(built, tmp_path):
     assert out.returncode == 0, out.stderr
     assert sorted(p.name for p in (tmp_path / "sim").iterdir()) == ["simulation.json", "simulation.png"]
     assert f"plot: {tmp_path / 'sim' / 'simulation.png'}" in out.stdout
+    # Again, after a killed run (its pid does not run) left its temporary folder there: it is cleared.
+    (tmp_path / "sim" / ".sim.999999999.tmp").mkdir()
+    assert run("simulate", folder, "--trials", 3, "--out", tmp_path / "sim", "--force").returncode == 0
+    assert sorted(p.name for p in (tmp_path / "sim").iterdir()) == ["simulation.json", "simulation.png"]
 
 
 def test_simulate_refuses_bad_options(built):
