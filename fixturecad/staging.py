@@ -68,7 +68,7 @@ def check_target(target: Path, force: bool, kind: str = "drawing", inputs=()) ->
     resolved = target.resolve()
     if resolved == Path.cwd() or resolved in Path.cwd().parents or resolved == resolved.parent:
         raise InputError(f"{target} holds the current folder: choose a new output folder")
-    existing = next(folder for folder in resolved.parents if folder.exists())
+    existing = _nearest_existing(resolved.parent)
     if not existing.is_dir():
         raise InputError(f"{existing} is a file, not a folder: cannot write {target}")
     for folder in inputs:
@@ -129,7 +129,7 @@ def check_files(folder: Path, names, force: bool) -> Path:
         raise InputError(f"{folder / existing[0]} already exists; pass --force to replace it")
     if folder.exists() and not folder.is_dir():
         raise InputError(f"{folder} is a file, not a folder")
-    parent = next(path for path in (folder, *folder.resolve().parents) if path.exists())
+    parent = _nearest_existing(folder)
     if not parent.is_dir():
         raise InputError(f"{parent} is a file, not a folder: cannot write {folder}")
     try:
@@ -145,7 +145,7 @@ def staged_files(folder: Path, names):
     missing) together when the block completes. On any error or interruption nothing is left: no file, no
     folder."""
     folder = Path(folder)
-    parent = next(path for path in (folder, *folder.resolve().parents) if path.exists())
+    parent = _nearest_existing(folder)
     try:
         _remove_stale(parent, folder.name)
         staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
@@ -161,6 +161,11 @@ def staged_files(folder: Path, names):
         raise write_error(error, folder) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def _nearest_existing(path: Path) -> Path:
+    """``path`` if it exists, else its nearest ancestor that does (where a missing folder would be made)."""
+    return next(folder for folder in (path, *path.resolve().parents) if folder.exists())
 
 
 def _remove_stale(where: Path, name: str) -> None:
