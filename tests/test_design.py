@@ -141,6 +141,64 @@ def test_a_design_carries_more_information_than_random_layouts(contact_class):
     assert np.isfinite(best) and layout.information >= best
 
 
+def test_segment_distances_are_the_least_over_sampled_points():
+    """The clearance between pieces and approach rays: against the least distance over 401 points along
+    each segment (never below it, within the sampling's step above it), points and parallel segments
+    among them."""
+    from fixturecad.design.layout import _segment_distances
+
+    rng = np.random.default_rng(3)
+    a0, a1, b0, b1 = (rng.normal(0.0, 10.0, (400, 3)) for _ in range(4))
+    a1[:50], b1[50:100] = a0[:50], b0[50:100]
+    b1[100:150] = b0[100:150] + (a1[100:150] - a0[100:150]) * rng.uniform(-2.0, 2.0, (50, 1))
+    s = np.linspace(0.0, 1.0, 401)[:, None]
+    sampled = np.array([np.linalg.norm((p + s * (q - p))[:, None] - (u + s * (v - u))[None], axis=2).min()
+                        for p, q, u, v in zip(a0, a1, b0, b1)])
+    step = np.maximum(np.linalg.norm(a1 - a0, axis=1), np.linalg.norm(b1 - b0, axis=1)) / 400
+    distances = _segment_distances(a0, a1, b0, b1)
+    assert np.all(distances <= sampled + 1e-9) and np.all(sampled - distances <= step)
+
+
+@pytest.mark.parametrize("contact_class", ["{S-S}{S-S}{S-C}{C-R-C}{C-R-C}{C-R-C}", "{G3-R}{S-S}{S-S}{S-C}{S-C}",
+                                           "{R}{S-T1}"])
+def test_a_nudge_is_judged_as_the_whole_layout_would_be(contact_class):
+    """The refinement redoes only what a nudge changes (the moved piece's fit, the rays it may block, its
+    touches and their information): over 150 bold nudges of a design, each is kept or refused as the whole
+    checks (every piece's fit, every touch's ray, the whole plan's information) keep or refuse it, with
+    the same plan."""
+    from fixturecad.design.layout import (_blocks, _fits, _nudged, _prints, criterion_values, planned,
+                                          plan_information, refined, TURNS)
+
+    combination = for_class(re.findall(r"{([^}]*)}", contact_class))
+    layout = design(combination).layout
+    layout = refined(layout, combination.contacts, combination.labels, BALL_MM, np.random.default_rng(0), steps=0)
+    rng = np.random.default_rng(5)
+    units = sorted({piece.id for piece in layout.pieces} | {fid for ctype, fid in zip(combination.contacts,
+                                                                                       combination.labels)
+                                                             if ctype.sensor in ("L", "C")})
+    outcomes = []
+    for _ in range(150):
+        fid = units[int(rng.integers(len(units)))]
+        aspect = int(rng.integers(TURNS + 1))
+        pieces = [_nudged(piece, layout.size, rng, 4.0, aspect) if piece.id == fid else piece
+                  for piece in layout.pieces]
+        if not all(_prints(piece, combination.labels.count(piece.id), layout.size) for piece in pieces):
+            continue
+        turns = {key: turn + rng.normal(0.0, 0.5) if key[0] == fid and aspect == TURNS and turn is not None
+                 else turn for key, turn in layout.turns.items()}
+        args = (combination.contacts, combination.labels, layout.size, BALL_MM, pieces, layout.faces, rng, turns)
+        part = planned(*args, layout, fid) if _fits(pieces, layout.size, fid) else None
+        whole = planned(*args) if _fits(pieces, layout.size) else None
+        assert (part is None) == (whole is None)
+        outcomes.append(part is not None)
+        if part is not None:
+            assert json.dumps(part.touches + part.checks) == json.dumps(whole.touches + whole.checks)
+            blocks = {**layout.blocks, **_blocks(part, [fid])}
+            assert float(criterion_values(sum(blocks.values()), "d")) == pytest.approx(
+                plan_information(whole.features(), whole.touches + whole.checks, layout.size), abs=1e-9)
+    assert 10 <= sum(outcomes) <= 140  # both kept and refused nudges were judged
+
+
 @pytest.mark.parametrize("args, words", [
     (["P/F-XL/M"], ["cannot read contact"]),
     (["P/F-PL/M@a", "P/F-S/M@a"], ["label 'a'", "one fixture element"]),

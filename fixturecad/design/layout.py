@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fixturecad.registration.contacts import ContactType
-from fixturecad.registration.elements import perpendicular_basis
+from fixturecad.registration.elements import cross, perpendicular_basis
 from fixturecad.registration.features import Cylinder, Extent, Line, Plane, Point, Sphere
 from fixturecad.registration.mobility import matrix_rank
 from fixturecad.registration.problem import Problem
@@ -64,7 +64,7 @@ MIN_SIZE_MM = 20.0
 DEGENERATE_MM2 = 1e-12  # a segment whose squared length is below this is a point (a ball's capsule)
 LAYOUTS_COMPARED = 64  # locating layouts a design chooses the best of
 LAYOUT_TRIALS = 400  # random layouts tried at most
-REFINE_STEPS = 120  # nudges tried on each layout refined
+REFINE_STEPS = 200  # nudges tried on each layout refined
 REFINED_STARTS = 3  # the best random layouts refined: one alone often sits in a poorer basin
 NUDGE = 0.03  # a nudge's standard deviation: of the size for feet
 NUDGE_RAD = 0.08  # and for directions, phases and sensor turns
@@ -141,7 +141,7 @@ class Piece:
     def roof_normals(self) -> list:
         """Outward normals of a chisel's two roof faces, each leaving the ridge."""
         beta = math.radians(ROOF_HALF_ANGLE_DEG)
-        across = np.cross(self.w, self.ridge)
+        across = cross(self.w, self.ridge)
         return [math.cos(beta) * self.w + side * math.sin(beta) * across for side in (1.0, -1.0)]
 
     def volume(self) -> float:
@@ -190,6 +190,10 @@ class Layout:
     margin: float = 0.0
     mobility: int = 6
     information: float = -math.inf  # log det of the default plan's scaled information (the D criterion)
+    # What the refinement reuses of the features a nudge leaves alone: each touch's (point, normal, approached
+    # from above) by (feature id, index), and each feature's touches' scaled information (6, 6).
+    spots: dict = field(default_factory=dict, repr=False)
+    blocks: dict = field(default_factory=dict, repr=False)
 
     @property
     def thickness(self) -> float:
@@ -245,8 +249,13 @@ def plan_bound(features, entries) -> tuple:
 def plan_information(features, entries, length_mm) -> float:
     """The D criterion of a plan as ``fixturecad plan`` takes it: log det of its rows' information with
     rotations scaled by ``length_mm`` (-inf when it does not locate)."""
+    return float(criterion_values(_scaled_information(features, entries, length_mm), "d"))
+
+
+def _scaled_information(features, entries, length_mm) -> np.ndarray:
+    """The information (6, 6) of a plan's rows, rotations scaled by ``length_mm``: a sum over its touches."""
     J = plan_jacobian(features, entries) * np.array([1.0 / length_mm] * 3 + [1.0] * 3)
-    return float(criterion_values(J.T @ J, "d"))
+    return J.T @ J
 
 
 def plan_mobility(features, entries, length_mm) -> tuple[int, float]:
@@ -265,7 +274,7 @@ def _unit(v) -> np.ndarray:
 
 def _rotate(v, axis, angle):
     """``v`` turned by ``angle`` rad about unit ``axis`` (Rodrigues)."""
-    return v * math.cos(angle) + np.cross(axis, v) * math.sin(angle) + axis * (axis @ v) * (1 - math.cos(angle))
+    return v * math.cos(angle) + cross(axis, v) * math.sin(angle) + axis * (axis @ v) * (1 - math.cos(angle))
 
 
 def _direction(rng, outward=None) -> np.ndarray:
@@ -355,7 +364,7 @@ def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, tur
     if axis is None:
         tangent = _rotate(perpendicular_basis(normal)[0], normal, turn)
     else:
-        tangent = _unit(np.cross(axis, normal))  # across the edge, or round the boss
+        tangent = _unit(cross(axis, normal))  # across the edge, or round the boss
         if feature.kind == "cylinder":
             tilt = math.radians(BOSS_SENSOR_TILT_DEG)
             tangent = _rotate(tangent, normal, min(tilt, max(-tilt, turn)))
@@ -367,27 +376,24 @@ def sensor_entry(ctype: ContactType, feature, point, normal, ball_mm: float, tur
     return entry
 
 
-def _segment_distance(a0, a1, b0, b1) -> float:
-    """Smallest distance between the segments a0-a1 and b0-b1, either of them possibly a point, mm: the
-    closest points' parameters, each clamped to its segment (Ericson, Real-Time Collision Detection, 5.1.9)."""
+def _segment_distances(a0, a1, b0, b1) -> np.ndarray:
+    """Smallest distances (n,) between the segments a0-a1 and b0-b1 ((n, 3) each, mm), any of them possibly a
+    point: the closest points' parameters, each clamped to its segment (Ericson, Real-Time Collision
+    Detection, 5.1.9)."""
     d1, d2, r = a1 - a0, b1 - b0, a0 - b0
-    a, e, f = float(d1 @ d1), float(d2 @ d2), float(d2 @ r)
-    if a <= DEGENERATE_MM2:
-        s, t = 0.0, (min(1.0, max(0.0, f / e)) if e > DEGENERATE_MM2 else 0.0)
-    else:
-        c = float(d1 @ r)
-        if e <= DEGENERATE_MM2:
-            s, t = min(1.0, max(0.0, -c / a)), 0.0
-        else:
-            b = float(d1 @ d2)
-            denominator = a * e - b * b  # 0 for parallel segments: any s will do, take 0
-            s = min(1.0, max(0.0, (b * f - c * e) / denominator)) if denominator > DEGENERATE_MM2 * a else 0.0
-            t = (b * s + f) / e
-            if t < 0.0:
-                s, t = min(1.0, max(0.0, -c / a)), 0.0
-            elif t > 1.0:
-                s, t = min(1.0, max(0.0, (b - c) / a)), 1.0
-    return float(np.linalg.norm(r + s * d1 - t * d2))
+    a, e, f = np.sum(d1 * d1, axis=-1), np.sum(d2 * d2, axis=-1), np.sum(d2 * r, axis=-1)
+    c, b = np.sum(d1 * r, axis=-1), np.sum(d1 * d2, axis=-1)
+    point_a, point_b = a <= DEGENERATE_MM2, e <= DEGENERATE_MM2
+    a, e = np.where(point_a, 1.0, a), np.where(point_b, 1.0, e)
+    denominator = a * e - b * b  # 0 for parallel segments: any s will do, take 0
+    skew = denominator > DEGENERATE_MM2 * a
+    s = np.where(skew, np.clip((b * f - c * e) / np.where(skew, denominator, 1.0), 0.0, 1.0), 0.0)
+    t = (b * s + f) / e
+    s = np.where(t < 0.0, np.clip(-c / a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / a, 0.0, 1.0), s))
+    t = np.clip(t, 0.0, 1.0)
+    s = np.where(point_a, 0.0, np.where(point_b, np.clip(-c / a, 0.0, 1.0), s))
+    t = np.where(point_b, 0.0, np.where(point_a, np.clip(f / e, 0.0, 1.0), t))
+    return np.linalg.norm(r + s[..., None] * d1 - t[..., None] * d2, axis=-1)
 
 
 def _capsules(piece: Piece) -> list:
@@ -445,13 +451,12 @@ def rim_points(size) -> np.ndarray:
     return np.array([[-corner, -corner, 0.0], [corner, -corner, 0.0], [-corner, corner, 0.0]])
 
 
-def _fits(pieces, size) -> bool:
+def _fits(pieces, size, moved=None) -> bool:
     """Every piece inside the block's footprint, clear of the others and of the rim touches seen from
-    above, its head above the block."""
-    if not all(_reachable(point, np.array([0.0, 0.0, 1.0]), None, pieces, size) for point in rim_points(size)):
-        return False
+    above, its head above the block; or, given the id of the one piece ``moved`` since they fitted, that one."""
     thickness = BASE_THICKNESS * size
-    for piece in pieces:
+    mine = [piece for piece in pieces if moved is None or piece.id == moved]
+    for piece in mine:
         w_xy = math.hypot(piece.w[0], piece.w[1])
         below = piece.below()
         if np.abs(piece.foot[:2]).max() + piece.reach + below * w_xy > size / 2 - CLEARANCE_MM:
@@ -460,22 +465,34 @@ def _fits(pieces, size) -> bool:
             return False
         if piece.lowest_above() < CLEARANCE_MM:
             return False
-    for i, first in enumerate(pieces):
-        for second in pieces[i + 1:]:
-            for a0, a1, ra in _capsules(first):
-                for b0, b1, rb in _capsules(second):
-                    if _segment_distance(a0, a1, b0, b1) < ra + rb + CLEARANCE_MM:
-                        return False
-    return True
-
-
-def _reachable(point, normal, owner, pieces, size) -> bool:
-    """The approach ray along the outward normal climbs and clears every other piece."""
-    if normal[2] < MIN_APPROACH_Z:
+    rim = rim_points(size)
+    if not _reachable(rim, np.broadcast_to([0.0, 0.0, 1.0], rim.shape), [None] * len(rim), mine, size):
         return False
-    end = point + 3.0 * size * normal
-    return all(_segment_distance(point, end, a0, a1) > r + CLEARANCE_MM
-               for piece in pieces if piece.id != owner for a0, a1, r in _capsules(piece))
+    capsules = [(piece.id, capsule) for piece in pieces for capsule in _capsules(piece)]
+    pairs = [(first, second) for i, first in enumerate(capsules) for second in capsules[i + 1:]
+             if first[0] != second[0] and moved in (None, first[0], second[0])]
+    if not pairs:
+        return True
+    (a0, a1, ra), (b0, b1, rb) = ([np.array(part) for part in zip(*(pair[side][1] for pair in pairs))]
+                                  for side in (0, 1))
+    return bool(np.all(_segment_distances(a0, a1, b0, b1) >= ra + rb + CLEARANCE_MM))
+
+
+def _reachable(points, normals, owners, pieces, size) -> bool:
+    """Whether every touch's approach ray (points and outward normals (n, 3), the ids of the pieces they lie
+    on) climbs and clears every other piece."""
+    if not len(points):
+        return True
+    if np.min(normals[:, 2]) < MIN_APPROACH_Z:
+        return False
+    pairs = [(k, capsule) for k, owner in enumerate(owners) for piece in pieces if piece.id != owner
+             for capsule in _capsules(piece)]
+    if not pairs:
+        return True
+    touch = np.array([k for k, _ in pairs])
+    a0, a1, r = (np.array(part) for part in zip(*(capsule for _, capsule in pairs)))
+    ends = points + 3.0 * size * normals
+    return bool(np.all(_segment_distances(points[touch], ends[touch], a0, a1) > r + CLEARANCE_MM))
 
 
 def layout_plan(contacts, labels, size, ball_mm, rng, block_faces=True):
@@ -492,33 +509,51 @@ def layout_plan(contacts, labels, size, ball_mm, rng, block_faces=True):
     return None if pieces is None else planned(contacts, labels, size, ball_mm, pieces, faces, rng)
 
 
-def planned(contacts, labels, size, ball_mm, pieces, faces, rng, turns=None):
+def planned(contacts, labels, size, ball_mm, pieces, faces, rng, turns=None, previous=None, moved=None):
     """The layout of these pieces and block faces with its touch plan, or None when a touch is hidden. Its
     sensors are turned as ``turns`` ((feature id, touch index) -> rad) says, the rest by ``rng``
-    (:func:`sensor_turn`), and the layout keeps every turn."""
+    (:func:`sensor_turn`), and the layout keeps every turn. Given the ``previous`` layout, of which only the
+    feature ``moved`` (a piece, or its sensors' turns) has changed, the other features' touches are its."""
     order = list(dict.fromkeys(labels))
     on_faces = {fid: face for face, fid in faces.items()}
     layout = Layout(size, pieces, [], [], faces)
     by_id = {piece.id: piece for piece in pieces}
-    features = {f.id: f for f in layout.features()}
+    features = {f.id: f for f in layout.block_features()}
+    features.update({piece.id: piece.feature() for piece in pieces if previous is None or piece.id == moved})
     seen = {fid: 0 for fid in order}
-    for ctype, fid in zip(contacts, labels):
+    for i, (ctype, fid) in enumerate(zip(contacts, labels)):
         count = labels.count(fid)
-        for index, plan in ((seen[fid], layout.touches), (seen[fid] + count, layout.checks)):
+        for index, plan, kept in ((seen[fid], layout.touches, previous and previous.touches),
+                                  (seen[fid] + count, layout.checks, previous and previous.checks)):
+            key = (fid, index)
+            if previous is not None and fid != moved:
+                layout.spots[key], layout.turns[key] = previous.spots[key], previous.turns[key]
+                plan.append(kept[i])
+                continue
             if fid in on_faces:
                 point, normal = face_spot(on_faces[fid], index, size, layout.thickness)
-                reachable = normal[2] < 1 or _reachable(point, normal, fid, pieces, size)  # a side: from outside
             else:
                 point, normal = touch_spot(by_id[fid], index, 2 * count)
-                reachable = _reachable(point, normal, fid, pieces, size)
-            if not reachable:
-                return None
-            key = (fid, index)
-            turn = turns[key] if turns is not None else sensor_turn(ctype, features[fid], rng)
+            feature = features[fid]
+            layout.spots[key] = (point, normal, fid not in on_faces or normal[2] >= 1)  # a side: from outside
+            turn = turns[key] if turns is not None else sensor_turn(ctype, feature, rng)
             layout.turns[key] = turn
-            plan.append(sensor_entry(ctype, features[fid], point, normal, ball_mm, turn))
+            plan.append(sensor_entry(ctype, feature, point, normal, ball_mm, turn))
         seen[fid] += 1
-    return layout
+    above = [(point, normal, key[0]) for key, (point, normal, up) in layout.spots.items() if up]
+    if previous is not None:
+        # Only the moved piece's touches and the rays that pass it can have changed.
+        near = [spot for spot in above if spot[2] == moved]
+        others = [spot for spot in above if spot[2] != moved]
+        return layout if (_reached(near, pieces, size)
+                          and _reached(others, [by_id[moved]] if moved in by_id else [], size)) else None
+    return layout if _reached(above, pieces, size) else None
+
+
+def _reached(spots, pieces, size) -> bool:
+    """:func:`_reachable` of touches given as (point, normal, the id of the piece they lie on)."""
+    points, normals, owners = zip(*spots) if spots else ((), (), ())
+    return _reachable(np.array(points).reshape(-1, 3), np.array(normals).reshape(-1, 3), owners, pieces, size)
 
 
 def best_layout(contacts, labels, size, ball_mm, seed, keep=LAYOUTS_COMPARED, trials=LAYOUT_TRIALS,
@@ -552,52 +587,77 @@ def best_layout(contacts, labels, size, ball_mm, seed, keep=LAYOUTS_COMPARED, tr
     return None, lowest
 
 
-def _nudged(piece: Piece, size, rng, scale) -> Piece:
-    """The piece moved a little, ``scale`` times the nudge: foot, direction, sizes and phase (a step of
-    :func:`refined`)."""
-    w = _unit(piece.w + rng.normal(0.0, scale * NUDGE_RAD, 3))
-    foot = piece.foot + np.r_[rng.normal(0.0, scale * NUDGE * size, 2), 0.0]
+FOOT, DIRECTION, RADIUS, LENGTH, BALL, PHASE, TURNS = range(7)  # what a nudge moves (:func:`refined`)
+
+
+def _nudged(piece: Piece, size, rng, scale, aspect) -> Piece:
+    """The piece with one ``aspect`` moved a little, ``scale`` times the nudge (a step of :func:`refined`)."""
+    step = lambda k: scale if aspect == k else 0.0  # noqa: E731
+    w = _unit(piece.w + rng.normal(0.0, step(DIRECTION) * NUDGE_RAD, 3))
+    foot = piece.foot + np.r_[rng.normal(0.0, step(FOOT) * NUDGE * size, 2), 0.0]
     ridge = None if piece.ridge is None else _unit(piece.ridge - (piece.ridge @ w) * w)
-    grow = np.exp(rng.normal(0.0, scale * NUDGE_GROWTH_LOG, 3))
+    grow = np.exp(rng.normal(0.0, NUDGE_GROWTH_LOG, 3) * np.array([step(RADIUS), step(LENGTH), step(BALL)]))
     return Piece(piece.id, piece.element, foot, w, piece.radius * grow[0], piece.length * grow[1], ridge,
-                 piece.head_radius * grow[2], piece.phase + rng.normal(0.0, scale * NUDGE_RAD))
+                 piece.head_radius * grow[2], piece.phase + rng.normal(0.0, step(PHASE) * NUDGE_RAD))
 
 
 def _better(layout, contacts, labels, ball_mm, rng, pieces, turns, moved):
-    """The layout of these pieces and sensor turns when the piece ``moved`` still prints, the pieces fit and
-    are reached, the default plan carries more information than ``layout``'s and the minimal plan locates;
-    else None. The information is tested first: most nudges fail there, and the mobility costs as much."""
-    if not (all(math.degrees(math.asin(min(1.0, piece.w[2]))) >= MIN_ELEVATION_DEG
-                and (piece.element != "S" or piece.radius <= MAX_STALK_OF_BALL * piece.head_radius)
-                and _as_drawn(piece, labels.count(piece.id), layout.size)
-                for piece in pieces if piece.id == moved) and _fits(pieces, layout.size)):
+    """The layout of these pieces and sensor turns when the feature ``moved`` (a piece or its sensors' turns)
+    still prints, the pieces fit and are reached, the default plan carries more information than
+    ``layout``'s and the minimal plan locates; else None. Only what the moved feature changes is redone, and
+    the information is tested before the mobility: most nudges fail there."""
+    if not (all(_prints(piece, labels.count(piece.id), layout.size) for piece in pieces if piece.id == moved)
+            and _fits(pieces, layout.size, moved)):
         return None
-    candidate = planned(contacts, labels, layout.size, ball_mm, pieces, layout.faces, rng, turns)
+    candidate = planned(contacts, labels, layout.size, ball_mm, pieces, layout.faces, rng, turns, layout, moved)
     if candidate is None:
         return None
-    features = candidate.features()
-    candidate.information = plan_information(features, candidate.touches + candidate.checks, layout.size)
+    candidate.blocks = {**layout.blocks, **_blocks(candidate, [moved])}
+    candidate.information = float(criterion_values(sum(candidate.blocks.values()), "d"))
     if not candidate.information > layout.information:
         return None
-    candidate.mobility, candidate.margin = plan_mobility(features, candidate.touches, layout.size)
+    candidate.mobility, candidate.margin = plan_mobility(candidate.features(), candidate.touches, layout.size)
     return candidate if not candidate.mobility and candidate.margin >= MIN_MARGIN else None
 
 
+def _prints(piece, touches, size) -> bool:
+    """Whether a nudged piece still prints without support (its stalk steep enough, a ball's stalk thinner
+    than the ball) and lies within the ranges its sizes are drawn from."""
+    return (math.degrees(math.asin(min(1.0, piece.w[2]))) >= MIN_ELEVATION_DEG
+            and (piece.element != "S" or piece.radius <= MAX_STALK_OF_BALL * piece.head_radius)
+            and _as_drawn(piece, touches, size))
+
+
+def _blocks(layout, fids) -> dict:
+    """The scaled information (6, 6) of each of these features' touches in the layout's default plan."""
+    features = [piece.feature() for piece in layout.pieces if piece.id in fids] + layout.block_features()
+    return {fid: _scaled_information(features, [entry for entry in layout.touches + layout.checks
+                                                if entry["feature"] == fid], layout.size) for fid in fids}
+
+
 def refined(layout, contacts, labels, ball_mm, rng, steps=REFINE_STEPS):
-    """The layout improved by random nudges of one feature at a time (a piece: its foot, direction, sizes
-    and phase; and the turns of its touches' line and cylinder sensors), each kept when the pieces still
-    fit, print and are reached, the default plan's information grows and the minimal plan still locates.
-    The nudges grow after one kept and shrink after one not (the one-fifth rule), so that they stay large
-    while they pay."""
+    """The layout improved by random nudges of one aspect of one feature at a time (a piece's foot,
+    direction, stalk radius, length, ball radius or phase, or the turns of the line and cylinder sensors laid
+    on a feature), each kept when the pieces still fit, print and are reached, the default plan's information
+    grows and the minimal plan still locates. The nudges grow after one kept and shrink after one not (the
+    one-fifth rule), so that they stay large while they pay; one aspect at a time, more of them are kept
+    than of nudges of every aspect at once."""
     size = layout.size
     laid = {fid for ctype, fid in zip(contacts, labels) if ctype.sensor in ("L", "C")}  # turns that matter
-    units = [piece.id for piece in layout.pieces] + sorted(laid - {piece.id for piece in layout.pieces})
+    aspects = {piece.id: [FOOT, DIRECTION, RADIUS, LENGTH] + [BALL] * (piece.element == "S")
+               + [PHASE] * (piece.element in ("PL", "S", "C")) for piece in layout.pieces}
+    for fid in laid:
+        aspects.setdefault(fid, []).append(TURNS)
+    units = sorted(aspects)
     scale = 1.0
+    layout.blocks = _blocks(layout, set(labels))
     for _ in range(steps if units else 0):
         fid = units[int(rng.integers(len(units)))]
-        pieces = [_nudged(piece, size, rng, scale) if piece.id == fid else piece for piece in layout.pieces]
-        turns = {key: turn if key[0] != fid or turn is None else turn + rng.normal(0.0, scale * NUDGE_RAD)
-                 for key, turn in layout.turns.items()}
+        aspect = aspects[fid][int(rng.integers(len(aspects[fid])))]
+        pieces = [_nudged(piece, size, rng, scale, aspect) if piece.id == fid and aspect != TURNS else piece
+                  for piece in layout.pieces]
+        turns = {key: turn + rng.normal(0.0, scale * NUDGE_RAD) if key[0] == fid and aspect == TURNS
+                 and turn is not None else turn for key, turn in layout.turns.items()}
         candidate = _better(layout, contacts, labels, ball_mm, rng, pieces, turns, fid)
         if candidate is not None:
             layout, scale = candidate, min(MAX_NUDGE_SCALE, scale * NUDGE_GROWTH)
