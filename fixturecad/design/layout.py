@@ -650,7 +650,7 @@ def refined(layout, contacts, labels, ball_mm, rng, steps=REFINE_STEPS):
         aspects.setdefault(fid, []).append(TURNS)
     units = sorted(aspects)
     scale = 1.0
-    layout.blocks = _blocks(layout, set(labels))
+    layout.blocks = _blocks(layout, sorted(set(labels)))  # one order: a sum in another rounds otherwise
     for _ in range(steps if units else 0):
         fid = units[int(rng.integers(len(units)))]
         aspect = aspects[fid][int(rng.integers(len(aspects[fid])))]
