@@ -640,8 +640,8 @@ def refined(layout, contacts, labels, ball_mm, rng, steps=REFINE_STEPS):
     direction, stalk radius, length, ball radius or phase, or the turns of the line and cylinder sensors laid
     on a feature), each kept when the pieces still fit, print and are reached, the default plan's information
     grows and the minimal plan still locates. The nudges grow after one kept and shrink after one not (the
-    one-fifth rule), so that they stay large while they pay; one aspect at a time, more of them are kept
-    than of nudges of every aspect at once."""
+    one-fifth rule), so that they stay large while they pay. (Nudges of every aspect at once, 120 a start,
+    left 12 classes of Table V behind the best of 1,000 random layouts.)"""
     size = layout.size
     laid = {fid for ctype, fid in zip(contacts, labels) if ctype.sensor in ("L", "C")}  # turns that matter
     aspects = {piece.id: [FOOT, DIRECTION, RADIUS, LENGTH] + [BALL] * (piece.element == "S")
