@@ -3,7 +3,8 @@
 A pose *passes* when its cost (the sum of its squared rows) is at most
 ``T = sigma^2 q``, q the residual test's chi-square quantile. Sensor touches
 enter as the point touches that stand in for them (:mod:`.stand_ins`), with
-``T`` divided by their factor. Write each point
+``T`` divided by their factor, or with bounds of their own rows
+(:mod:`.sensor_bounds`), added to both bounds below. Write each point
 or ball touch's place on the fixture as ``x_i = R^T b_i + y``, ``b_i = p_i - c``
 (``c`` the touches' measured centroid, ``y`` its image on the fixture). A
 touch's rows measure the distance ``d_i(x_i)`` of ``x_i`` from its element (a
@@ -62,6 +63,8 @@ from .mobility import matrix_rank
 from .patches import box_corners, patch_box, patch_points
 from .pose import rotation_from_vector, vector_from_rotation
 from .problem import Problem
+from .problem import _subset
+from .sensor_bounds import SensorBounds, bounded
 from .stand_ins import deviation_bound_mm, stand_ins
 from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
 
@@ -144,11 +147,13 @@ def search(problem, threshold, stop=None):
 
 
 def stand_in_tree(problem, threshold):
-    """The :class:`Tree` over the problem's point and ball touches and its sensors' stand-ins, the threshold
-    divided by their factor (:mod:`.stand_ins`), and the number of sensor touches not searched in full."""
-    groups, kappa2, left, found = stand_ins(problem, threshold)
+    """The :class:`Tree` over the problem's point and ball touches, its sensors' stand-ins, the threshold
+    divided by their factor (:mod:`.stand_ins`), and the sensors with no stand-in that it bounds by their own
+    rows (:mod:`.sensor_bounds`, on an exact part); and the number of sensor touches not searched in full."""
+    groups, kappa2, left, found, without = stand_ins(problem, threshold)
+    sensors = [(g, k) for g, k in without if bounded(g)] if problem.tolerance is None else []
     problem = Problem(groups, problem.sigma, problem.lever, problem.tolerance)
-    return Tree(problem, threshold / kappa2, None, found), left
+    return Tree(problem, threshold / kappa2, None, found, sensors, 1.0 / kappa2), left - len(sensors)
 
 
 def first_cells():
@@ -170,11 +175,15 @@ def beyond_pi(v, w):
 class Tree:
     """The branch and bound of the module doc over one problem's point and ball touches (``centroid``: the
     point whose image is y, by default theirs); the last groups, one touch each, may be sensors' stand-ins
-    (:class:`.stand_ins.StandIn`)."""
+    (:class:`.stand_ins.StandIn`). ``sensors``: (group, k) of sensor touches bounded by their own rows
+    (:mod:`.sensor_bounds`), their bound times ``weight``."""
 
-    def __init__(self, problem, threshold, centroid=None, stand_ins=()):
+    def __init__(self, problem, threshold, centroid=None, stand_ins=(), sensors=(), weight=1.0):
         groups = [g for g in problem.groups if g.points is not None]
         self.problem = Problem(groups, problem.sigma, problem.lever)
+        # Every row the search bounds, sensors' included: what fixes the pose, and what regions' poses are refined on.
+        self.full = Problem(groups + [_subset(g, np.array([k])) for g, k in sensors], problem.sigma, problem.lever)
+        self.sensors = None
         # The test, deviations and all; with stand-ins off their sensors' features on a printed part only what
         # must pass is known of it (their features have no modes of their own).
         printed_stand_ins = problem.tolerance is not None and not all(one.own for one in stand_ins)
@@ -191,10 +200,15 @@ class Tree:
         middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
         middle = np.where(np.isfinite(middle), middle, 0.0)
         # (Its bounds hold either way: :mod:`.unlabelled` uses them where the rows leave motions free.)
-        self.fixes_pose = any(matrix_rank(self.problem.evaluate(R, self.centroid - R @ middle)[1],
-                                          self.problem.scale()) == 6 for R in rotation_from_vector(RANK_ROTATIONS))
+        self.fixes_pose = any(matrix_rank(self.full.evaluate(R, self.centroid - R @ middle)[1],
+                                          self.full.scale()) == 6 for R in rotation_from_vector(RANK_ROTATIONS))
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
+        if sensors:
+            self.sensors = SensorBounds(sensors, problem.lever, self.centroid, weight)
+        # The points a region's extent follows: the touches, and where bounded sensors are placed.
+        self.markers = self.points if self.sensors is None else np.vstack([self.points, self.sensors.markers])
+        self.marker_rho = np.linalg.norm(self.markers - self.centroid, axis=1)
         self.modes(groups, problem.tolerance, threshold / problem.sigma**2, stand_ins)
         # Each touch's element: its core, anchor, direction and how far off the core the touch lies at contact
         # (a ball's centre by both radii, its ``rho``; a point probe by the feature's radius).
@@ -371,6 +385,11 @@ class Tree:
         if self.round.any():
             near = self.round_least(c.a, c.ylo, c.yhi)
             bound = bound + np.sum(np.maximum(near - turn[:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
+        if self.sensors is not None:
+            # The sensors bounded by their own rows: a cost apart from the touches', and their first-order rows.
+            sensed, c.s_value, c.s_jw, c.s_m, c.s_rem, c.s_fine = self.sensors.cells(
+                c.R, c.delta, self.box_centre(c), np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1))
+            bound = bound + sensed
         c.zeroth = bound
         return c
 
@@ -491,6 +510,11 @@ class Tree:
         # A round touch whose move may reach its core has no tangent model: the cell is no leaf.
         c.modelled = np.all(usable[..., 0], axis=1) if self.round.any() else np.ones(K, bool)
         Jw = cross(unit, a_rows)  # row j's change with omega: m . (a x omega) = (m x a) . omega
+        if self.sensors is not None:
+            unit, Jw = np.concatenate([unit, c.s_m], axis=1), np.concatenate([Jw, c.s_jw], axis=1)
+            value = np.concatenate([value, c.s_value], axis=1)
+            remainder2 = remainder2 + np.sum(c.s_rem**2, axis=1)
+            c.modelled = c.modelled & c.s_fine
         if self.L is not None:
             # The part's deviations z = L u as unknowns beside y, each u held by a row sigma u (the test is
             # min over z of |r - J_d z|^2 + sigma^2 z^T S^-1 z): the rows' change with u taken at the y box's
@@ -606,6 +630,11 @@ class Tree:
             if budget is not None and sum(kept) > budget:
                 return None, f"more than {budget} cells with sensors' rows left out: the rest leave the pose weak"
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
+            if self.sensors is not None:
+                # Bounded sensors have no model: where the touches' model leaves a motion free, a leaf's poses are
+                # its whole cell, which must then be as narrow as a settled region.
+                whole = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1) + c.delta * self.marker_rho.max()
+                leaf &= c.held | (whole <= 0.5 * SETTLED_MM)
             done.append(c.take(leaf))
             c = c.take(~leaf)
             if not len(c.v):
@@ -696,6 +725,10 @@ class Tree:
         picks = np.concatenate([best for best, _ in groups])
         Rs, ts = self.refined(start_R[picks], self.centroid - np.einsum("kij,kj->ki", start_R[picks], start_y[picks]))
         relaxed = self.relaxed_cost(Rs, ts)
+        # The bounded sensors' cost (their rows after the touches'), weighted as their bounds are.
+        sensed = 0.0 if self.sensors is None else self.sensors.weight * np.sum(
+            self.full.evaluate_batch(Rs, ts)[0][:, self.problem.size:] ** 2, axis=1)
+        sensed = np.broadcast_to(sensed, relaxed.shape)
         out, first = [], 0
         for best, members in groups:
             k = first + int(np.argmin(relaxed[first:first + len(best)]))
@@ -706,8 +739,9 @@ class Tree:
                 if self.L is not None and r @ r > self.root**2:  # refined on the test itself, deviations included
                     R, t, r, _ = levenberg_marquardt(self.judge, R, t, max_iterations=REFINE_STEPS)
                 cost = float(r @ r)
-            # How far any pose of the region that may pass puts a touch from where the refined pose puts it.
-            x_ref = (self.points - t) @ R
+            cost += float(sensed[k])
+            # How far any pose of the region that may pass puts a touch (or a sensor) from where the refined pose does.
+            x_ref = (self.markers - t) @ R
             extent = float(np.max(np.linalg.norm(centre[members] - x_ref[None], axis=2) + reach[members]))
             out.append(Region((R, t), cost <= self.root**2, extent, members, float(relaxed[k])))
         out.sort(key=lambda region: region.cost)
@@ -742,22 +776,23 @@ class Tree:
         start_R = c.R @ rotation_from_vector(omega)
         box = self.box_centre(c)
         start_y = np.where(held[:, None], theta[:, 3:6], box)
-        kappa = (c.delta**2 / 2.0 + c.delta**3 / 6.0)[:, None] * self.rho[None]
+        a = c.a if self.sensors is None else (self.markers - self.centroid) @ c.R
+        kappa = (c.delta**2 / 2.0 + c.delta**3 / 6.0)[:, None] * self.marker_rho[None]
         # Touch i at a_i + a_i x omega + y + e_i, |e_i| <= kappa_i: over the ellipsoid, within
         # sqrt(slack lambda_max(B_i W B_i^T)) + kappa_i of its image at theta*, B_i = [a_i x, I].
-        B = np.concatenate([_skew(c.a), np.broadcast_to(np.eye(3), c.a.shape + (3,))], axis=3)  # (K, n, 3, 6)
+        B = np.concatenate([_skew(a), np.broadcast_to(np.eye(3), a.shape + (3,))], axis=3)  # (K, n, 3, 6)
         spread = np.sqrt(slack[:, None] * np.linalg.eigvalsh(np.einsum("knij,kjl,knml->knim", B, W[:, :6, :6], B))[..., -1])
-        image = c.a + cross(c.a, theta[:, None, :3]) + theta[:, None, 3:6]
+        image = a + cross(a, theta[:, None, :3]) + theta[:, None, 3:6]
         # Where the model leaves a motion free: the cell, every turn within delta and every y in its box.
-        whole = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1)[:, None] + c.delta[:, None] * self.rho[None]
-        centre = np.where(held[:, None, None], image, c.a + box[:, None])
+        whole = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1)[:, None] + c.delta[:, None] * self.marker_rho[None]
+        centre = np.where(held[:, None, None], image, a + box[:, None])
         reach = np.where(held[:, None], spread + kappa, whole)
         return start_R, start_y, centre, reach
 
     def refined(self, Rs, ts):
-        """Poses refined together by Gauss-Newton on the touches' rows: (Rs, ts)."""
+        """Poses refined together by Gauss-Newton on the touches' rows and the bounded sensors': (Rs, ts)."""
         for _ in range(REFINE_STEPS):
-            r, J = self.problem.evaluate_batch(Rs, ts)
+            r, J = self.full.evaluate_batch(Rs, ts)
             A = J.transpose(0, 2, 1) @ J
             A = A + 1e-9 * (np.trace(A, axis1=1, axis2=2)[:, None, None] + 1e-12) * np.eye(6)
             step = -np.linalg.solve(A, J.transpose(0, 2, 1) @ r[..., None])[..., 0]

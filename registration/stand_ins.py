@@ -79,24 +79,26 @@ class StandIn:
 
 def stand_ins(problem, threshold):
     """The point and ball touches of the problem, then a stand-in for every sensor touch that has one:
-    (groups, kappa2, left, stand-ins), ``kappa2`` the least of their factors (module doc), ``left`` the
-    number of sensor touches not searched in full (no stand-in, or one with fewer rows than the touch: a
-    normal's or a tangency's rows left out), the :class:`StandIn` of each of the last groups."""
+    (groups, kappa2, left, stand-ins, without), ``kappa2`` the least of their factors (module doc), ``left``
+    the number of sensor touches not searched in full (no stand-in, or one with fewer rows than the touch: a
+    normal's or a tangency's rows left out), the :class:`StandIn` of each of the last groups, and the (group,
+    k) of each sensor touch with no stand-in (among ``left``)."""
     groups = [g for g in problem.groups if g.points is not None]
-    kappa2, left, found = 1.0, 0, []
+    kappa2, left, found, without = 1.0, 0, [], []
     for g in (g for g in problem.groups if g.points is None):
         rows = Problem([g]).size // g.count  # each touch's rows
         for k in range(g.count):
             one = stand_in(g, k, threshold, problem.lever)
             if one is None or (problem.tolerance is not None and not one.own and not np.all(np.isfinite(one.places))):
                 left += 1
+                without.append((g, k))
                 continue
             group = point_touches(one.feature, one.point, g.index[k:k + 1])
             left += Problem([group]).size < rows
             groups.append(group)
             kappa2 = min(kappa2, one.kappa2)
             found.append(one)
-    return groups, kappa2, left, found
+    return groups, kappa2, left, found, without
 
 
 def stand_in(group, k, threshold, lever_mm):

@@ -130,7 +130,6 @@ class Case:
     printed: bool = False  # registered on a printed part: the fixture's recorded tolerance, as register.py does
     unlabelled: bool = False  # the touches given without their features, to the engine and the brute force
     symmetric: bool = False  # its poses are images of one another under the fixture's symmetry: none separates them
-    complete: bool = True  # its search must complete (Example One's sensors have no stand-in: it cannot)
 
 
 CASES = [
@@ -147,7 +146,8 @@ CASES = [
          _counts({"plane": 2, "cylinder": 4}), printed=True),
     Case("Example Two 3+3", "inclined-plane-cylinder", (0.0, SIGMA_MM), _counts({"plane": 3, "cylinder": 3})),
     Case("sphere-plate 2 per ball", "sphere-plate", (0.0, SIGMA_MM), _counts({"ball_1": 2, "ball_2": 2, "ball_3": 2})),
-    Case("Example One (paper plan)", "quarter-sphere", (0.0,), plan="paper", complete=False),
+    # The paper's plane sensor on a plane and line sensor across an edge: bounded by their own rows.
+    Case("Example One (paper plan)", "quarter-sphere", (0.0, SIGMA_MM), plan="paper"),
     Case("v-block 4-4-4, unlabelled", "v-block", (SIGMA_MM,), _counts({"groove_a": 4, "groove_b": 4, "end": 4}),
          unlabelled=True),
     # Its three poses are the images of the corner's symmetry: no touch tells them apart.

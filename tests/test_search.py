@@ -324,15 +324,18 @@ def test_the_geodesic_radius_of_a_rotation_box():
 
 
 def test_a_search_that_did_not_complete_claims_nothing():
-    """Example One's plan (plane and line sensors, one point touch) is not searched completely: the result
-    says so, with where, and its exit code is 6 whatever the status; underdetermined keeps 4."""
+    """Example One's plan on the printed part, whose sensors the search does not bound (docs/registration.md),
+    is not searched completely: the result says so, with where, and its exit code is 6 whatever the status;
+    underdetermined keeps 4."""
     from fixturecad.registration.engine import register_touches
     from fixturecad.registration.synthetic import plan_touches
     from fixturecad.registration.touchfile import exit_code
 
     document = features_document(make("quarter-sphere"))
+    features = features_from_json(document)
     touches, contacts = plan_touches(document["plans"]["paper"]["touch_plan"], np.eye(4))
-    result = register_touches(features_from_json(document), touches, contacts=contacts)
+    result = register_touches(features, touches, contacts=contacts,
+                              tolerance=tolerance_from_document(features, document))
     assert result["search"] == "incomplete" and "do not fix a pose" in result["search_reason"]
     assert exit_code(result) == 6
     assert exit_code({**result, "status": "underdetermined"}) == 4

@@ -43,8 +43,7 @@ def test_never_a_confident_wrong_pose(case, noise_mm, first, layouts):
                 for check, attributes in CHECKS.items()}
     failures["separating touch"] = [(first + k, o.separating) for k, o in enumerate(outcomes)
                                     if o.separating not in ("", "separates")]
-    if case.complete:
-        # Not complete, and not underdetermined (which claims no pose, exit 4): exit 6, no claim, but no answer.
-        failures["search not complete"] = [(first + k, o.status) for k, o in enumerate(outcomes)
-                                           if o.search != "complete" and o.status != "underdetermined"]
+    # Not complete, and not underdetermined (which claims no pose, exit 4): exit 6, no claim, but no answer.
+    failures["search not complete"] = [(first + k, o.status) for k, o in enumerate(outcomes)
+                                       if o.search != "complete" and o.status != "underdetermined"]
     assert {check: found for check, found in failures.items() if found} == {}

@@ -1,0 +1,187 @@
+"""Sensor touches the search bounds by their own rows: those with no stand-in (:mod:`.stand_ins`).
+
+A line sensor across an edge or round a boss (both sides mobile: the lines' distance is ``rho``), and a
+plane sensor lying on a plane, a line or a cylinder (a locus: the normals agree, or the line lies in the
+plane, at an offset) know no point on either side, so no point touch stands in for them. The search
+(:mod:`.search`) bounds their cost over each cell directly. Write the cell's rotations as within ``delta``
+of ``R0`` and its images ``y`` within ``h`` (the y box's half-diagonal) of its centre ``y_c``; a sensor's
+point ``x`` maps to ``x' = R^T (x - c) + y`` on the fixture, which moves by at most ``delta |x - c| + h``
+over the cell, and its directions ``R^T u`` by at most ``delta``.
+
+A sensor touch's cost is ``r^T C^-1 r``, ``C = G G^T / L^2 + J_v J_v^T`` (:func:`.noise.row_whitening`:
+``J_v`` the rows' translation Jacobian, ``G`` their change with a turn of the fixture about the sensor's
+placement centre ``o``, ``L`` the lever). For a subset S of its rows it is at least ``r_S^T C_SS^-1 r_S >=
+|r_S|^2 / lambda_max(C_SS)`` (leaving rows out of a Mahalanobis distance never raises it); the bound is the
+largest over the subsets below, each row's least size over the cell over a bound of ``lambda_max``:
+
+* rows that only turn (a plane's normal against the sensor's, ``n.t1, n.t2``; a line's direction in a
+  plane, ``n.d``): their length is the sine (cosine) of an angle that the cell moves by at most ``delta``,
+  and a turn changes them at most one for one (``G`` has rows ``n x t_k``, of largest singular value 1;
+  ``|d x n| <= 1``), no shift does: ``lambda_max <= 1 / L^2``;
+* a plane's offset row ``n.(q_B - q_A) - rho`` (the other side's point from the plane): in the fixture frame
+  ``(R^T n).(q - y) - n.(q_A - c) - rho`` with the plane the sensor's, or ``n.(x' - q) - rho`` with it the
+  fixture's; it moves by at most ``delta |q - y_c| + (1 + delta) h`` or ``delta |x - c| + h``; a shift
+  moves it one for one and a turn about ``o`` by at most ``|q - o'|`` (``|x - o|``):
+  ``lambda_max <= 1 + lever^2 / L^2``;
+* the distance of two lines, ``|(p_A - p_B).m| - rho``, ``m`` the unit common normal: at the cell's centre
+  the closest point ``x_a`` on the sensor's line, ``D_c`` the distance, ``p*`` the closest on the fixture's;
+  the distance is ``|(x_a' - p*).m|`` (any points of the two lines will do), and ``x_a'_c - p* = D_c m_c``,
+  so it moves by at most ``delta |x_a - c| + h + D_c |dm|^2 / 2`` with ``|dm| <= min(2, 2 delta / s_c)``
+  (``s_c = |d_A' x d_B|`` the sine of their angle, moved at most ``delta``); a shift moves it one for one and a turn about ``o`` by at most ``|x_b - o'|`` (``x_b`` the
+  closest point on the fixture's line, by the envelope theorem), ``<= D_o (1 + 1/s^2) + e_o`` (``D_o`` the
+  distance of ``o``'s foot on the sensor's line from the fixture's line, ``e_o`` that of ``o`` from its
+  foot, ``s >= s_c - delta``): ``lambda_max <= 1 + lever^2 / L^2``. Where ``s_c <= delta`` the lines may
+  turn parallel in the cell: no bound.
+
+On a printed part these sensors are not bounded (their rows' deviations are not modelled here) and stay left
+out of the search. This module imports numpy only and nothing of fixturecad: it is inlined into the
+generated standalone ``register.py``.
+"""
+
+import numpy as np
+
+from .elements import cross
+from .stand_ins import _rows
+
+LOCUS_SENSORS = ("PL",)  # sensor kinds lying on a locus that are bounded
+LINE_KINDS = ("L", "C")  # elements whose core is a line
+
+
+def bounded(group):
+    """Whether the search bounds this sensor group's touches (module doc): a plane sensor on a plane, a line or a
+    cylinder, a plane feature under a line or a cylinder sensor, and a mobile line or cylinder on a mobile
+    line or cylinder."""
+    ctype = group.ctype
+    if ctype.is_locus:
+        return True
+    return (ctype.sensor in LINE_KINDS and ctype.fixture in LINE_KINDS and not ctype.sensor_fixed
+            and not ctype.fixture_fixed)
+
+
+class SensorBounds:
+    """Lower bounds of sensor touches' cost over cells (module doc). ``touches``: (group, k) pairs, each touch k
+    of a group that :func:`bounded` accepts; ``centroid`` (3,) mm: the point whose image is y; ``weight``: the
+    bounds' factor (the search's threshold is divided by its stand-ins' factor, the sensors' cost not)."""
+
+    def __init__(self, touches, lever_mm, centroid, weight=1.0):
+        self.lever2 = float(lever_mm) ** 2
+        self.centroid = np.asarray(centroid, float)
+        self.weight = float(weight)
+        self.touches = [(group.ctype, _side(group.sensor, group.count, k), _side(group.fixture, group.count, k),
+                         float(group.rho[k]), np.asarray(group.centre[k], float)) for group, k in touches]
+        # Where the sensors are placed (measurement frame): the points a region's extent follows besides the touches.
+        self.markers = np.array([o for *_, o in self.touches]).reshape(-1, 3)
+
+    def cells(self, R, delta, yc, h):
+        """Over cells of rotations within ``delta`` (K,) rad of ``R`` (K, 3, 3) and images within ``h`` (K,) mm
+        of ``yc`` (K, 3), fixture frame: the sum (K,) of the touches' cost bounds, and rows linear in the cell's
+        turn omega (``R = R0 exp(omega)``) and image y whose squares sum to at most the touches' cost, off by at
+        most ``remainder`` each: (bound, value (K, s), Jw (K, s, 3), m (K, s, 3), remainder (K, s)); a row is
+        ``value + Jw.omega + m.y``. A row whose model does not hold over a cell is zero there, and ``usable``
+        (K,) says whether all hold."""
+        parts = []
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            for ctype, s, f, rho, o in self.touches:
+                one = self._locus if ctype.is_locus else self._lines
+                parts.append(one(ctype, s, f, rho, o, R, delta, yc, h))
+        bound = self.weight * sum(np.where(np.isfinite(b), b, 0.0) for b, *_ in parts)
+        value, Jw, m, remainder, usable = (np.concatenate([part[k] for part in parts], axis=1) for k in range(1, 6))
+        fine = usable & np.isfinite(value) & np.isfinite(remainder) & np.all(np.isfinite(Jw) & np.isfinite(m), axis=2)
+        root = np.sqrt(self.weight)
+        value, remainder = root * np.where(fine, value, 0.0), root * np.where(fine, remainder, 0.0)
+        Jw, m = root * np.where(fine[..., None], Jw, 0.0), root * np.where(fine[..., None], m, 0.0)
+        return bound, value, Jw, m, remainder, np.all(fine, axis=1)
+
+    def _moved(self, x, R, yc):
+        """Measurement-frame points (3,) or (K, 3) on the fixture at the cells' centres (K, 3)."""
+        return np.einsum("ki,kij->kj", np.broadcast_to(x - self.centroid, (len(R), 3)), R) + yc
+
+    def _locus(self, ctype, s, f, rho, o, R, delta, yc, h):
+        """A plane lying on a plane, a line or a cylinder (either side the plane)."""
+        c = self.centroid
+        kappa = delta**2 / 2.0 + delta**3 / 6.0
+        ones = np.ones(len(delta))
+        if ctype.sensor == "PL":
+            n = s["n"] @ R  # the sensor's normal on the fixture, (K, 3)
+            if ctype.fixture == "PL":  # the fixture's normal along the sensor's tangents
+                tangents = [s["t1"] @ R, s["t2"] @ R]
+                turn_rows = [t @ f["n"] for t in tangents]
+                turn_jw = [cross(f["n"], t) for t in tangents]
+                q = f["q"]
+            else:  # the line's direction across the sensor's normal
+                turn_rows, turn_jw, q = [n @ f["d"]], [cross(f["d"], n)], f["p"]
+            constant = s["n"] @ (s["q"] - c) + rho
+            offset = (np.einsum("ki,ki->k", n, q - yc) - constant, -n, cross(q - yc, n))  # at y_c; m; Jw
+            reach = np.linalg.norm(q - yc, axis=1)
+            swing = delta * (reach + h) + h
+            offset_rest = delta * h + kappa * (reach + h)
+            lever = np.linalg.norm(q - self._moved(o, R, yc), axis=1) + delta * np.linalg.norm(o - c) + h
+        else:  # a line or a cylinder sensor on a plane feature
+            d = s["d"] @ R
+            turn_rows, turn_jw = [d @ f["n"]], [cross(f["n"], d)]
+            a = self._moved(s["p"], R, np.zeros_like(yc))
+            offset = ((a + yc - f["q"]) @ f["n"] - rho, np.broadcast_to(f["n"], a.shape), cross(f["n"], a))
+            arm = np.linalg.norm(s["p"] - c)
+            swing, offset_rest = delta * arm + h, kappa * arm * ones
+            lever = np.linalg.norm(s["p"] - o) * ones
+        turn = np.sqrt(sum(r**2 for r in turn_rows))
+        slack = 1.0 + lever**2 / self.lever2
+        bound = np.maximum(self.lever2 * np.maximum(turn - delta, 0.0) ** 2,
+                           np.maximum(np.abs(offset[0]) - swing, 0.0) ** 2 / slack)
+        # All rows at once: the turn rows times L and the offset, over sqrt(2 + lever^2 / L^2) (module doc).
+        scale = 1.0 / np.sqrt(1.0 + slack)
+        L = np.sqrt(self.lever2)
+        value = np.stack([L * r for r in turn_rows] + [offset[0] - np.einsum("ki,ki->k", offset[1], yc)], axis=1)
+        Jw = np.stack([L * j for j in turn_jw] + [offset[2]], axis=1)
+        m = np.stack([np.zeros_like(offset[1])] * len(turn_rows) + [offset[1]], axis=1)
+        remainder = np.stack([L * kappa] * len(turn_rows) + [offset_rest], axis=1)
+        usable = np.ones(value.shape, bool)
+        return bound, value * scale[:, None], Jw * scale[:, None, None], m * scale[:, None, None], \
+            remainder * scale[:, None], usable
+
+    def _lines(self, ctype, s, f, rho, o, R, delta, yc, h):
+        """A line (or a cylinder's axis) at ``rho`` from another."""
+        c = self.centroid
+        kappa = delta**2 / 2.0 + delta**3 / 6.0
+        d = s["d"] @ R
+        m = cross(d, f["d"][None])
+        sine = np.linalg.norm(m, axis=1)
+        p = self._moved(s["p"], R, yc)
+        # The closest point on the sensor's line at the cells' centres, along d from p: t = f_w / (1 - cos^2).
+        w = f["p"] - p
+        cosine = d @ f["d"]
+        t = (np.einsum("ki,ki->k", d, w) - cosine * (w @ f["d"])) / sine**2
+        closest = s["p"][None] + t[:, None] * s["d"][None]  # measurement frame
+        signed = np.einsum("ki,ki->k", p - f["p"], m) / sine
+        distance = np.abs(signed)
+        du = np.minimum(2.0, 2.0 * delta / sine)  # how far the common normal turns over the cell
+        arm = np.linalg.norm(closest - c, axis=1)
+        swing = delta * arm + h + distance * du**2 / 2.0  # (x_a' - p*).u = D_c u_c.u + (x_a' - x_a'_c).u
+        least = np.maximum(np.maximum(distance - swing - rho, rho - distance - swing), 0.0)
+        # The placement centre's foot on the sensor's line, and that foot's distance from the fixture's line.
+        foot = s["p"] + ((o - s["p"]) @ s["d"]) * s["d"]
+        off = np.linalg.norm(o - foot)
+        g = self._moved(foot, R, yc) - f["p"]
+        apart = np.linalg.norm(g - np.outer(g @ f["d"], f["d"]), axis=1) + delta * np.linalg.norm(foot - c) + h
+        low = sine - delta
+        lever = np.where(low > 0.0, apart * (1.0 + 1.0 / low**2) + off, np.inf)
+        slack = 1.0 + lever**2 / self.lever2
+        bound = np.where(low > 0.0, least**2 / slack, 0.0)
+        # The distance (x_a' - p*).u along the common normal u signed to make it positive at the centre, p* the
+        # closest point on the fixture's line: linear in (omega, y) but for u's turn and the Rodrigues remainder.
+        u = np.where(signed < 0.0, -1.0, 1.0)[:, None] * m / sine[:, None]
+        a = self._moved(closest, R, np.zeros_like(yc))
+        x = a + yc
+        foot_f = f["p"] + ((x - f["p"]) @ f["d"])[:, None] * f["d"]
+        value = np.einsum("ki,ki->k", a - foot_f, u) - rho
+        remainder = distance * du**2 / 2.0 + (delta * arm + kappa * arm + h) * du + kappa * arm
+        # With rho > 0 the unsigned distance is the signed one only where it keeps its sign over the cell.
+        usable = (low > 0.0) & ((rho == 0.0) | (distance > swing))
+        scale = 1.0 / np.sqrt(slack)
+        return bound, (value * scale)[:, None], (cross(u, a) * scale[:, None])[:, None], (u * scale[:, None])[:, None], \
+            (remainder * scale)[:, None], usable[:, None]
+
+
+def _side(side, count, k):
+    """Touch k's geometry of a side: {key: (3,) or scalar}."""
+    return {key: value[k] for key, value in _rows(side.geometry, count).items()}
