@@ -43,7 +43,6 @@ import numpy as np
 from .elements import cross
 from .stand_ins import _rows
 
-LOCUS_SENSORS = ("PL",)  # sensor kinds lying on a locus that are bounded
 LINE_KINDS = ("L", "C")  # elements whose core is a line
 
 

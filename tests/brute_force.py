@@ -22,6 +22,9 @@ at the pose (the feature in the fixture frame, the sensor's measurement-frame ge
 * the two sensors of the paper's Example One: a plane sensor lying on a plane feature (its normal against the
   feature's, its known point on the plane and on the patch) and a line sensor crossing a line feature, both
   mobile (the two lines meet, the crossing on the line's extent);
+* on a boss, both mobile: a line sensor round it (the line the radius from the axis, where it touches on the
+  patch) and a plane sensor lying on it (its normal square to the axis, the axis the radius along it, the
+  contact line's point nearest the sensor's point on the patch);
 * a fixed surface sensor (a ball, plane or cylinder; its contact point p and its outward normal there known)
   on a mobile plane, sphere or cylinder: p on the surface, and the feature's outward normal at p against the
   sensor's (two rows);
@@ -215,6 +218,61 @@ class _LinesCross(_Contact):
         return feature.point + along[:, None] * u
 
 
+class _LineOnCylinder(_Contact):
+    """A line sensor round a boss, both mobile: the line at the cylinder's radius from its axis (one row, mm);
+    where it touches the cylinder, on the patch."""
+
+    POINT_KEYS = ("s",)
+    size = 1
+
+    def __init__(self, feature, sensor):
+        self.feature, self.s = feature, np.asarray(sensor["point"], float)
+        self.d = _unit(sensor["direction"])
+        self.anchor = self.s
+        _, self.point, self.axis, self.radius = feature.core()
+
+    def rows(self, A, b):
+        s_fix, d_fix = _points(A, b, self.s), A @ self.d
+        m = np.cross(d_fix, self.axis)
+        return (np.abs(np.einsum("ki,ki->k", s_fix - self.point, m)) / np.linalg.norm(m, axis=1)
+                - self.radius)[:, None]
+
+    def located(self, A, b):
+        s_fix, d_fix = _points(A, b, self.s), A @ self.d
+        # The closest points of the axis and the sensor line; the touch lies the radius out towards the line.
+        w = self.point - s_fix
+        c = d_fix @ self.axis
+        along = (c * np.einsum("ki,ki->k", d_fix, w) - w @ self.axis) / (1.0 - c * c)
+        foot = self.point + along[:, None] * self.axis
+        near = s_fix + np.einsum("ki,ki->k", d_fix, foot - s_fix)[:, None] * d_fix
+        return foot + self.radius * (near - foot) / np.linalg.norm(near - foot, axis=1, keepdims=True)
+
+
+class _PlaneOnCylinder(_Contact):
+    """A plane sensor lying on a boss, both mobile: its normal square to the axis (one row, scaled by
+    ``PAD_LEVER_MM``) and the axis the radius from the plane along the sensor's normal (one row, mm); the point of
+    the contact line nearest the sensor's point, on the patch."""
+
+    POINT_KEYS = ("s",)
+    size = 2
+
+    def __init__(self, feature, sensor):
+        self.feature, self.s = feature, np.asarray(sensor["point"], float)
+        self.n = _unit(sensor["normal"])
+        self.anchor = self.s
+        _, self.point, self.axis, self.radius = feature.core()
+
+    def rows(self, A, b):
+        s_fix, n_fix = _points(A, b, self.s), A @ self.n
+        return np.stack([PAD_LEVER_MM * n_fix @ self.axis,
+                         np.einsum("ki,ki->k", self.point - s_fix, n_fix) - self.radius], axis=1)
+
+    def located(self, A, b):
+        s_fix, n_fix = _points(A, b, self.s), A @ self.n
+        line = self.point - self.radius * n_fix  # a point of the contact line
+        return line + np.einsum("ki,i->k", s_fix - line, self.axis)[:, None] * self.axis
+
+
 class _FixedOnMobile(_Contact):
     """A fixed sensor, its contact point p known, on a mobile feature: p on the feature's surface (signed
     distance, mm), and
@@ -367,6 +425,10 @@ def contact_model(feature, contact):
     locus = "plane" in pair and len(pair - {"plane"} - {"line", "cylinder"}) == 0
     if kind == "line" and feature.kind == "line" and not sensor_fixed and not fixture_fixed:
         return _LinesCross(feature, sensor)
+    if kind == "line" and feature.kind == "cylinder" and not sensor_fixed and not fixture_fixed:
+        return _LineOnCylinder(feature, sensor)
+    if kind == "plane" and feature.kind == "cylinder" and not sensor_fixed and not fixture_fixed:
+        return _PlaneOnCylinder(feature, sensor)
     if sensor_fixed and not locus and "point" in contact:
         p = np.asarray(contact["point"], float)
         normal = _sensor_normal(sensor, p)

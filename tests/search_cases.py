@@ -168,6 +168,10 @@ CASES = [
     Case("{R}{R} design (default plan)", "{R}{R}", (0.0, SIGMA_MM), plan="default"),
     Case("{G3}{R-R-C}{S-T2} design (default plan)", "{G3}{R-R-C}{S-T2}", (0.0, SIGMA_MM), plan="default"),
     Case("{S-R}{S-R}{S-S}{S-S} design (default plan)", "{S-R}{S-R}{S-S}{S-S}", (0.0, SIGMA_MM), plan="default"),
+    # Designs whose sensors know no point on either side, bounded by their own rows: balls on a face (R) and line
+    # sensors round a boss, or a plane sensor lying on it.
+    Case("{R}{C-R-C} design (default plan)", "{R}{C-R-C}", (0.0, SIGMA_MM), plan="default"),
+    Case("{R}{G3-R} design (default plan)", "{R}{G3-R}", (0.0, SIGMA_MM), plan="default"),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
