@@ -192,35 +192,8 @@ class _PlaneOnPlane(_Contact):
 
 class _LinesCross(_Contact):
     """Example One's line sensor crossing a line feature, both mobile: the two lines meet (one row, mm); where
-    they cross on the line's extent."""
-
-    POINT_KEYS = ("s",)
-    size = 1
-
-    def __init__(self, feature, sensor):
-        self.feature, self.s = feature, np.asarray(sensor["point"], float)
-        self.d = _unit(sensor["direction"])
-        self.anchor = self.s
-
-    def rows(self, A, b):
-        feature = self.feature
-        s_fix, d_fix = _points(A, b, self.s), A @ self.d
-        m = np.cross(d_fix, feature.direction)
-        return (np.einsum("ki,ki->k", s_fix - feature.point, m) / np.linalg.norm(m, axis=1))[:, None]
-
-    def located(self, A, b):
-        # The point of the line feature closest to the sensor line: where they cross.
-        feature = self.feature
-        s_fix, d_fix = _points(A, b, self.s), A @ self.d
-        u, w = feature.direction, feature.point - s_fix
-        c = d_fix @ u
-        along = (c * np.einsum("ki,ki->k", d_fix, w) - w @ u) / (1.0 - c * c)
-        return feature.point + along[:, None] * u
-
-
-class _LineOnCylinder(_Contact):
-    """A line sensor round a boss, both mobile: the line at the cylinder's radius from its axis (one row, mm);
-    where it touches the cylinder, on the patch."""
+    they cross on the line's extent. Round a boss (a cylinder feature): the line at the radius from the axis (the
+    lines' unsigned distance less it), touching the cylinder the radius from the axis towards the line."""
 
     POINT_KEYS = ("s",)
     size = 1
@@ -234,16 +207,18 @@ class _LineOnCylinder(_Contact):
     def rows(self, A, b):
         s_fix, d_fix = _points(A, b, self.s), A @ self.d
         m = np.cross(d_fix, self.axis)
-        return (np.abs(np.einsum("ki,ki->k", s_fix - self.point, m)) / np.linalg.norm(m, axis=1)
-                - self.radius)[:, None]
+        apart = np.einsum("ki,ki->k", s_fix - self.point, m) / np.linalg.norm(m, axis=1)
+        return (apart if self.radius == 0.0 else np.abs(apart) - self.radius)[:, None]
 
     def located(self, A, b):
+        # The point of the feature's line closest to the sensor line (where they cross), moved the radius out.
         s_fix, d_fix = _points(A, b, self.s), A @ self.d
-        # The closest points of the axis and the sensor line; the touch lies the radius out towards the line.
         w = self.point - s_fix
         c = d_fix @ self.axis
         along = (c * np.einsum("ki,ki->k", d_fix, w) - w @ self.axis) / (1.0 - c * c)
         foot = self.point + along[:, None] * self.axis
+        if self.radius == 0.0:
+            return foot
         near = s_fix + np.einsum("ki,ki->k", d_fix, foot - s_fix)[:, None] * d_fix
         return foot + self.radius * (near - foot) / np.linalg.norm(near - foot, axis=1, keepdims=True)
 
@@ -423,10 +398,8 @@ def contact_model(feature, contact):
     if pair == {"plane"}:
         return _PlaneOnPlane(feature, sensor)
     locus = "plane" in pair and len(pair - {"plane"} - {"line", "cylinder"}) == 0
-    if kind == "line" and feature.kind == "line" and not sensor_fixed and not fixture_fixed:
+    if kind == "line" and feature.kind in ("line", "cylinder") and not sensor_fixed and not fixture_fixed:
         return _LinesCross(feature, sensor)
-    if kind == "line" and feature.kind == "cylinder" and not sensor_fixed and not fixture_fixed:
-        return _LineOnCylinder(feature, sensor)
     if kind == "plane" and feature.kind == "cylinder" and not sensor_fixed and not fixture_fixed:
         return _PlaneOnCylinder(feature, sensor)
     if sensor_fixed and not locus and "point" in contact:
