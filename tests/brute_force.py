@@ -225,8 +225,8 @@ class _LinesCross(_Contact):
 
 class _PlaneOnCylinder(_Contact):
     """A plane sensor lying on a boss, both mobile: its normal square to the axis (one row, scaled by
-    ``PAD_LEVER_MM``) and the axis the radius from the plane along the sensor's normal (one row, mm); the point of
-    the contact line nearest the sensor's point, on the patch."""
+    ``PAD_LEVER_MM``) and the axis, at the foot of the sensor's point, the radius from the plane along the
+    sensor's normal (one row, mm); the point of the contact line nearest the sensor's point, on the patch."""
 
     POINT_KEYS = ("s",)
     size = 2
@@ -239,8 +239,11 @@ class _PlaneOnCylinder(_Contact):
 
     def rows(self, A, b):
         s_fix, n_fix = _points(A, b, self.s), A @ self.n
+        # The axis's distance measured at the foot of the sensor's point (a turn of the sensor about its point
+        # moves it little there, and far along the axis by the axis's length).
+        foot = self.point + ((s_fix - self.point) @ self.axis)[:, None] * self.axis
         return np.stack([PAD_LEVER_MM * n_fix @ self.axis,
-                         np.einsum("ki,ki->k", self.point - s_fix, n_fix) - self.radius], axis=1)
+                         np.einsum("ki,ki->k", foot - s_fix, n_fix) - self.radius], axis=1)
 
     def located(self, A, b):
         s_fix, n_fix = _points(A, b, self.s), A @ self.n
