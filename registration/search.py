@@ -62,8 +62,7 @@ from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
 from .patches import box_corners, patch_box, patch_points
 from .pose import rotation_from_vector, vector_from_rotation
-from .problem import Problem
-from .problem import _subset
+from .problem import Problem, _subset
 from .sensor_bounds import SensorBounds, bounded
 from .stand_ins import deviation_bound_mm, stand_ins
 from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
@@ -631,8 +630,8 @@ class Tree:
                 return None, f"more than {budget} cells with sensors' rows left out: the rest leave the pose weak"
             leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
             if self.sensors is not None:
-                # Bounded sensors have no model: where the touches' model leaves a motion free, a leaf's poses are
-                # its whole cell, which must then be as narrow as a settled region.
+                # Where the model (the touches' and the sensors' rows) leaves a motion free, a leaf's poses are its
+                # whole cell, which must then be as narrow as a settled region.
                 whole = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1) + c.delta * self.marker_rho.max()
                 leaf &= c.held | (whole <= 0.5 * SETTLED_MM)
             done.append(c.take(leaf))
