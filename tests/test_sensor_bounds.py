@@ -4,6 +4,8 @@ or round a boss, a plane sensor on a plane or a boss, a line or a cylinder senso
 The bounds are checked against the contact model's own whitened rows (the cost the residual test takes) at poses
 sampled in cells, not against the formulas they are made of."""
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -38,6 +40,7 @@ def _cube_plan():
     ]
 
 
+@functools.lru_cache(maxsize=None)
 def _case(name):
     """(features, touch plan) of a case: a template's named plan, a design's default plan, or the cube's above."""
     if name == "cube, line and cylinder lying on the top":
