@@ -63,7 +63,7 @@ from .mobility import matrix_rank
 from .patches import box_corners, patch_box, patch_points
 from .pose import rotation_from_vector, vector_from_rotation
 from .problem import Problem, _subset
-from .sensor_bounds import SensorBounds, bounded
+from .sensor_bounds import Printed, SensorBounds, bounded
 from .stand_ins import deviation_bound_mm, stand_ins
 from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
 
@@ -148,9 +148,12 @@ def search(problem, threshold, stop=None):
 def stand_in_tree(problem, threshold):
     """The :class:`Tree` over the problem's point and ball touches, its sensors' stand-ins, the threshold
     divided by their factor (:mod:`.stand_ins`), and the sensors with no stand-in that it bounds by their own
-    rows (:mod:`.sensor_bounds`, on an exact part); and the number of sensor touches not searched in full."""
+    rows (:mod:`.sensor_bounds`); and the number of sensor touches not searched in full."""
     groups, kappa2, left, found, without = stand_ins(problem, threshold)
-    sensors = [(g, k) for g, k in without if bounded(g)] if problem.tolerance is None else []
+    # On a printed part the test takes the sensors' rows with the touches' (their deviations shared): not where
+    # stand-ins weigh the threshold or lie off their sensors' features.
+    judged = problem.tolerance is None or (kappa2 == 1.0 and all(one.own for one in found))
+    sensors = [(g, k) for g, k in without if bounded(g)] if judged else []
     problem = Problem(groups, problem.sigma, problem.lever, problem.tolerance)
     return Tree(problem, threshold / kappa2, None, found, sensors, 1.0 / kappa2), left - len(sensors)
 
@@ -181,12 +184,16 @@ class Tree:
         groups = [g for g in problem.groups if g.points is not None]
         self.problem = Problem(groups, problem.sigma, problem.lever)
         # Every row the search bounds, sensors' included: what fixes the pose, and what regions' poses are refined on.
-        self.full = Problem(groups + [_subset(g, np.array([k])) for g, k in sensors], problem.sigma, problem.lever)
+        singles = [_subset(g, np.array([k])) for g, k in sensors]
+        self.full = Problem(groups + singles, problem.sigma, problem.lever)
         self.sensors = None
-        # The test, deviations and all; with stand-ins off their sensors' features on a printed part only what
-        # must pass is known of it (their features have no modes of their own).
+        # The test, deviations and all, with the bounded sensors unless their cost is weighed apart; with stand-ins
+        # off their sensors' features on a printed part only what must pass is known of it (their features have
+        # no modes of their own).
+        self.sensors_apart = bool(sensors) and weight != 1.0
         printed_stand_ins = problem.tolerance is not None and not all(one.own for one in stand_ins)
-        self.judge = None if printed_stand_ins else Problem(groups, problem.sigma, problem.lever, problem.tolerance)
+        self.judge = None if printed_stand_ins else Problem(groups + ([] if self.sensors_apart else singles),
+                                                            problem.sigma, problem.lever, problem.tolerance)
         self.root = float(np.sqrt(threshold))
         if not groups:
             self.fixes_pose = False
@@ -203,12 +210,12 @@ class Tree:
                                           self.full.scale()) == 6 for R in rotation_from_vector(RANK_ROTATIONS))
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
+        self.modes(groups, problem.tolerance, threshold / problem.sigma**2, stand_ins, [g for g, _ in sensors])
         if sensors:
-            self.sensors = SensorBounds(sensors, problem.lever, self.centroid, weight)
+            self.sensors = SensorBounds(sensors, problem.lever, self.centroid, weight, self.printed)
         # The points a region's extent follows: the touches, and where bounded sensors are placed.
         self.markers = self.points if self.sensors is None else np.vstack([self.points, self.sensors.markers])
         self.marker_rho = np.linalg.norm(self.markers - self.centroid, axis=1)
-        self.modes(groups, problem.tolerance, threshold / problem.sigma**2, stand_ins)
         # Each touch's element: its core, anchor, direction and how far off the core the touch lies at contact
         # (a ball's centre by both radii, its ``rho``; a point probe by the feature's radius).
         core, anchor, direction, offset, boxes = [], [], [], [], []
@@ -273,22 +280,26 @@ class Tree:
         if self.round.any() and self.aligned[self.round].all():
             self.relevant[2] = False
 
-    def modes(self, groups, tolerance, q, stand_ins):
+    def modes(self, groups, tolerance, q, stand_ins, sensors):
         """A printed part's deviation modes, as the first-order model carries them: ``L`` (k, k') with
         ``L L^T`` the touched features' mode covariance S; each touch's modes' twists (n, k, 6) and radius
         flags (n, k); each touch's deviation bound ``dev`` (mm, :func:`deviation_bound`) and ``tilt`` = the
         largest turn (rad) of its feature that a pose that passes allows, ``sqrt(q lambda_max)`` of its turn's
         covariance. A sensor's stand-in takes its sensor's feature's modes, its deviation bound from
         :func:`.stand_ins.deviation_bound_mm`, and a radius mode moves its element by ``radius_move`` (fixture
-        frame) or the turned ``radius_sensor`` (measurement frame), its size within ``radius_dev`` (mm)."""
+        frame) or the turned ``radius_sensor`` (measurement frame), its size within ``radius_dev`` (mm). Each
+        bounded sensor touch (its group in ``sensors``) gets its feature's modes' twists and radius flags
+        (``sensor_twists``, ``sensor_radius``) and its :class:`.sensor_bounds.Printed` (``printed``)."""
         n = sum(g.count for g in groups)
-        self.dev, self.tilt, self.L = np.zeros(n), np.zeros(n), None
+        self.dev, self.tilt, self.L, self.printed = np.zeros(n), np.zeros(n), None, None
         if tolerance is None:
             return
         links = [None] * (len(groups) - len(stand_ins)) + [None if one.own else one for one in stand_ins]
         sources = [g.feature if link is None else link.source for g, link in zip(groups, links)]
-        fids = list(dict.fromkeys(f.id for f in sources))
-        index = np.concatenate([np.arange(tolerance.slices[f].start, tolerance.slices[f].stop) for f in fids])
+        fids = list(dict.fromkeys([f.id for f in sources] + [g.feature.id for g in sensors]))
+        # The touched features' modes among the tolerance's (the columns of L's rows).
+        self.mode_index = index = np.concatenate([np.arange(tolerance.slices[f].start, tolerance.slices[f].stop)
+                                                  for f in fids])
         S = tolerance.covariance[np.ix_(index, index)]
         h, E = np.linalg.eigh(S)
         keep = h > 1e-12 * max(h[-1], 1e-300)
@@ -315,9 +326,18 @@ class Tree:
                 self.radius_move[rows], self.radius_sensor[rows] = link.move, link.sensor_move
                 radius = m.radius.astype(float)
                 self.radius_dev[rows] = np.sqrt(q * max(radius @ s @ radius, 0.0)) * np.linalg.norm(link.sensor_move)
-            turn = m.twists[:, :3]
-            self.tilt[rows] = np.sqrt(q * max(np.linalg.eigvalsh(turn.T @ s @ turn)[-1], 0.0))
+            self.tilt[rows] = _largest_turn(tolerance, f, q)
             first += g.count
+        self.sensor_twists = np.zeros((len(sensors), len(index), 6))
+        self.sensor_radius = np.zeros((len(sensors), len(index)))
+        self.printed = []
+        for k, g in enumerate(sensors):
+            f, m = g.feature.id, tolerance.modes[g.feature.id]
+            columns = slice(start[f], start[f] + len(m.names))
+            self.sensor_twists[k, columns] = m.twists
+            self.sensor_radius[k, columns] = m.radius
+            self.printed.append(Printed(_largest_turn(tolerance, f, q),
+                                        deviation_bound_mm(tolerance, g.feature, m.centre[None], q), m.centre))
 
     def deviation_rows(self, unit, touch, x, R):
         """How each row (unit directions (K, R, 3) of touches ``touch`` (R,) at fixture places x (K, n, 3), the
@@ -386,7 +406,7 @@ class Tree:
             bound = bound + np.sum(np.maximum(near - turn[:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
         if self.sensors is not None:
             # The sensors bounded by their own rows: a cost apart from the touches', and their first-order rows.
-            sensed, c.s_value, c.s_jw, c.s_m, c.s_rem, c.s_fine = self.sensors.cells(
+            sensed, c.s_value, c.s_jw, c.s_m, c.s_rem, c.s_fine, c.s_twist, c.s_radius = self.sensors.cells(
                 c.R, c.delta, self.box_centre(c), np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1))
             bound = bound + sensed
         c.zeroth = bound
@@ -509,6 +529,7 @@ class Tree:
         # A round touch whose move may reach its core has no tangent model: the cell is no leaf.
         c.modelled = np.all(usable[..., 0], axis=1) if self.round.any() else np.ones(K, bool)
         Jw = cross(unit, a_rows)  # row j's change with omega: m . (a x omega) = (m x a) . omega
+        touch_rows = unit.shape[1]
         if self.sensors is not None:
             unit, Jw = np.concatenate([unit, c.s_m], axis=1), np.concatenate([Jw, c.s_jw], axis=1)
             value = np.concatenate([value, c.s_value], axis=1)
@@ -531,7 +552,14 @@ class Tree:
             # A stand-in's radius mode along its sensor's normal turns with the cell: off by delta times its size.
             off_dev += c.delta[:, None] * self.radius_dev[touch]
             remainder2 = remainder2 + np.sum(off_dev**2, axis=1)
-            Jz = self.deviation_rows(unit, touch, c.a + centre[:, None], c.R)
+            Jz = self.deviation_rows(unit[:, :touch_rows], touch, c.a + centre[:, None], c.R)
+            if self.sensors is not None:
+                # A sensor's row moves with its feature's modes as the row's twist and radius say (its remainder
+                # in the sensor's own).
+                rows = self.sensors.row_touch
+                change = np.einsum("ksi,sci->ksc", c.s_twist, self.sensor_twists[rows]) \
+                    + c.s_radius[..., None] * self.sensor_radius[rows][None]
+                Jz = np.concatenate([Jz, change @ self.L], axis=1)
             k = self.L.shape[1]
             prior = np.broadcast_to(np.hstack([np.zeros((k, 3)), self.problem.sigma * np.eye(k)]), (K, k, 3 + k))
             unit = np.concatenate([np.concatenate([unit, -Jz], axis=2), prior], axis=1)
@@ -725,7 +753,7 @@ class Tree:
         Rs, ts = self.refined(start_R[picks], self.centroid - np.einsum("kij,kj->ki", start_R[picks], start_y[picks]))
         relaxed = self.relaxed_cost(Rs, ts)
         # The bounded sensors' cost (their rows after the touches'), weighted as their bounds are.
-        sensed = 0.0 if self.sensors is None else self.sensors.weight * np.sum(
+        sensed = 0.0 if not self.sensors_apart else self.sensors.weight * np.sum(
             self.full.evaluate_batch(Rs, ts)[0][:, self.problem.size:] ** 2, axis=1)
         sensed = np.broadcast_to(sensed, relaxed.shape)
         out, first = [], 0
@@ -799,6 +827,14 @@ class Tree:
             ts = ts + (Rs @ step[:, 3:, None])[..., 0]
             Rs = Rs @ rotation_from_vector(step[:, :3])
         return Rs, ts
+
+
+def _largest_turn(tolerance, fid, q):
+    """The largest turn (rad) of a printed feature that a pose that passes allows: ``sqrt(q lambda_max)`` of its
+    turn's covariance."""
+    turn = tolerance.modes[fid].twists[:, :3]
+    s = tolerance.covariance[tolerance.slices[fid], tolerance.slices[fid]]
+    return float(np.sqrt(q * max(np.linalg.eigvalsh(turn.T @ s @ turn)[-1], 0.0)))
 
 
 def contact_offset(group):

@@ -33,8 +33,22 @@ largest over the subsets below, each row's least size over the cell over a bound
   foot, ``s >= s_c - delta``): ``lambda_max <= 1 + lever^2 / L^2``. Where ``s_c <= delta`` the lines may
   turn parallel in the cell: no bound.
 
-On a printed part these sensors are not bounded (their rows' deviations are not modelled here) and stay left
-out of the search. This module imports numpy only and nothing of fixturecad: it is inlined into the
+On a printed part (:class:`Printed`) the test's rows are ``r - J_d z``, ``J_d`` the rows' change as the
+fixture's feature moves by its modes (a twist ``(omega_f, v_f)``, moving a point p by ``D(p) = omega_f x p +
+v_f``, and a radius), ``z`` of a pose that passes within ``z^T S^-1 z <= q``: the feature turns by at most
+``tilt`` and moves its mode centre ``o_f`` by at most ``dev`` (:func:`.stand_ins.deviation_bound_mm`), so a
+point p by at most ``dev + tilt |p - o_f|``. A turn row changes by ``(n x t).omega_f`` (at most ``tilt``), a
+plane's offset row by ``n.D(q)`` at the fixture plane's or line's own point (the sensor's normal n), by
+``-n.D(x)`` at the sensor's point x (the fixture's normal), and two lines' distance by ``-u.D(p*)`` at the
+closest point on the fixture's line (the envelope theorem), less one per mm of the fixture's radius where the
+offset holds it. Each subset bound takes each row's least size less that (its largest change), and the rows'
+change at the cell's centre (``twist``, ``radius``) enters the search's first-order model with the modes as
+unknowns, off by at most how far the cell turns the row's direction times the move and turns the place it is
+taken at times ``tilt``: ``delta (dev + tilt |p - o_f|) + tilt |dp|``. The closest point p* on the fixture's
+line lies within the bound above of the placement centre's image o' at every pose of the cell (the lever),
+which moves by ``delta |o - c| + h``: so ``|dp*| <= lever + delta |o - c| + h + |o'_c - p*_c|``.
+
+This module imports numpy only and nothing of fixturecad: it is inlined into the
 generated standalone ``register.py``.
 """
 
@@ -57,49 +71,76 @@ def bounded(group):
             and not ctype.fixture_fixed)
 
 
+class Printed:
+    """A sensor touch's fixture feature as printed (module doc): ``tilt`` (rad) the largest turn and ``dev`` (mm)
+    the largest move of its mode centre ``centre`` (3,) mm that a pose that passes allows."""
+
+    def __init__(self, tilt, dev, centre):
+        self.tilt, self.dev, self.centre = float(tilt), float(dev), np.asarray(centre, float)
+
+    def at(self, p, reach=0.0):
+        """The largest move (K,) mm of the feature at points p (K, 3), or anywhere within ``reach`` (K,) of them."""
+        far = np.linalg.norm(p - self.centre, axis=-1) + reach
+        return self.dev + (self.tilt * far if self.tilt else np.zeros_like(far))
+
+
+EXACT = Printed(0.0, 0.0, np.zeros(3))  # a feature that does not deviate
+
+
 class SensorBounds:
     """Lower bounds of sensor touches' cost over cells (module doc). ``touches``: (group, k) pairs, each touch k
     of a group that :func:`bounded` accepts; ``centroid`` (3,) mm: the point whose image is y; ``weight``: the
-    bounds' factor (the search's threshold is divided by its stand-ins' factor, the sensors' cost not)."""
+    bounds' factor (the search's threshold is divided by its stand-ins' factor, the sensors' cost not);
+    ``printed``: each touch's :class:`Printed` feature on a printed part."""
 
-    def __init__(self, touches, lever_mm, centroid, weight=1.0):
+    def __init__(self, touches, lever_mm, centroid, weight=1.0, printed=None):
         self.lever2 = float(lever_mm) ** 2
         self.centroid = np.asarray(centroid, float)
         self.weight = float(weight)
         self.touches = [(group.ctype, _side(group.sensor, group.count, k), _side(group.fixture, group.count, k),
                          float(group.rho[k]), np.asarray(group.centre[k], float)) for group, k in touches]
+        self.printed = [EXACT] * len(touches) if printed is None else list(printed)
         # Where the sensors are placed (measurement frame): the points a region's extent follows besides the touches.
         self.markers = np.array([o for *_, o in self.touches]).reshape(-1, 3)
+        # Each row's touch: a plane on a plane has three rows, a plane and a line or a cylinder two, two lines one.
+        counts = [1 if not ctype.is_locus else 3 if ctype.sensor == ctype.fixture else 2 for ctype, *_ in self.touches]
+        self.row_touch = np.repeat(np.arange(len(counts)), counts)
 
     def cells(self, R, delta, yc, h):
         """Over cells of rotations within ``delta`` (K,) rad of ``R`` (K, 3, 3) and images within ``h`` (K,) mm
         of ``yc`` (K, 3), fixture frame: the sum (K,) of the touches' cost bounds, and rows linear in the cell's
         turn omega (``R = R0 exp(omega)``) and image y whose squares sum to at most the touches' cost, off by at
-        most ``remainder`` each: (bound, value (K, s), Jw (K, s, 3), m (K, s, 3), remainder (K, s)); a row is
-        ``value + Jw.omega + m.y``. A row whose model does not hold over a cell is zero there, and ``usable``
-        (K,) says whether all hold."""
+        most ``remainder`` each: (bound, value (K, s), Jw (K, s, 3), m (K, s, 3), remainder (K, s), usable,
+        twist (K, s, 6), radius (K, s)); a row is ``value + Jw.omega + m.y``, and on a printed part it changes
+        by ``twist.(omega_f, v_f)`` as its touch's feature (``row_touch``) moves by that twist and by ``radius``
+        per mm of its radius (module doc). A row whose model does not hold over a cell is zero there, and
+        ``usable`` (K,) says whether all hold."""
         parts = []
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            for ctype, s, f, rho, o in self.touches:
+            for (ctype, s, f, rho, o), printed in zip(self.touches, self.printed):
                 one = self._locus if ctype.is_locus else self._lines
-                parts.append(one(ctype, s, f, rho, o, R, delta, yc, h))
+                parts.append(one(ctype, s, f, rho, o, printed, R, delta, yc, h))
         bound = self.weight * sum(np.where(np.isfinite(b), b, 0.0) for b, *_ in parts)
-        value, Jw, m, remainder, usable = (np.concatenate([part[k] for part in parts], axis=1) for k in range(1, 6))
-        fine = usable & np.isfinite(value) & np.isfinite(remainder) & np.all(np.isfinite(Jw) & np.isfinite(m), axis=2)
+        value, Jw, m, remainder, usable, twist, radius = (np.concatenate([part[k] for part in parts], axis=1)
+                                                          for k in range(1, 8))
+        fine = usable & np.isfinite(value) & np.isfinite(remainder) & np.all(
+            np.isfinite(Jw) & np.isfinite(m) & np.isfinite(twist[..., :3]) & np.isfinite(twist[..., 3:]), axis=2)
         root = np.sqrt(self.weight)
         value, remainder = root * np.where(fine, value, 0.0), root * np.where(fine, remainder, 0.0)
         Jw, m = root * np.where(fine[..., None], Jw, 0.0), root * np.where(fine[..., None], m, 0.0)
-        return bound, value, Jw, m, remainder, np.all(fine, axis=1)
+        twist, radius = root * np.where(fine[..., None], twist, 0.0), root * np.where(fine, radius, 0.0)
+        return bound, value, Jw, m, remainder, np.all(fine, axis=1), twist, radius
 
     def _moved(self, x, R, yc):
         """Measurement-frame points (3,) or (K, 3) on the fixture at the cells' centres (K, 3)."""
         return np.einsum("ki,kij->kj", np.broadcast_to(x - self.centroid, (len(R), 3)), R) + yc
 
-    def _locus(self, ctype, s, f, rho, o, R, delta, yc, h):
+    def _locus(self, ctype, s, f, rho, o, printed, R, delta, yc, h):
         """A plane lying on a plane, a line or a cylinder (either side the plane)."""
         c = self.centroid
         kappa = delta**2 / 2.0 + delta**3 / 6.0
         ones = np.ones(len(delta))
+        radius = 0.0
         if ctype.sensor == "PL":
             n = s["n"] @ R  # the sensor's normal on the fixture, (K, 3)
             if ctype.fixture == "PL":  # the fixture's normal along the sensor's tangents
@@ -109,12 +150,17 @@ class SensorBounds:
                 q = f["q"]
             else:  # the line's direction across the sensor's normal
                 turn_rows, turn_jw, q = [n @ f["d"]], [cross(f["d"], n)], f["p"]
+                radius = -1.0 if ctype.fixture == "C" else 0.0  # the offset holds the cylinder's radius
             constant = s["n"] @ (s["q"] - c) + rho
             offset = (np.einsum("ki,ki->k", n, q - yc) - constant, -n, cross(q - yc, n))  # at y_c; m; Jw
             reach = np.linalg.norm(q - yc, axis=1)
             swing = delta * (reach + h) + h
             offset_rest = delta * h + kappa * (reach + h)
             lever = np.linalg.norm(q - self._moved(o, R, yc), axis=1) + delta * np.linalg.norm(o - c) + h
+            # The fixture's point q moves by D(q) along n, which the cell turns by delta.
+            offset_twist = np.concatenate([np.broadcast_to(cross(q, n), n.shape), n], axis=1)
+            offset_dev = printed.at(q) * ones
+            offset_dev_rest = delta * offset_dev
         else:  # a line or a cylinder sensor on a plane feature
             d = s["d"] @ R
             turn_rows, turn_jw = [d @ f["n"]], [cross(f["n"], d)]
@@ -123,22 +169,30 @@ class SensorBounds:
             arm = np.linalg.norm(s["p"] - c)
             swing, offset_rest = delta * arm + h, kappa * arm * ones
             lever = np.linalg.norm(s["p"] - o) * ones
+            # The plane moves by D(x) at the sensor's point x, which moves by at most the swing over the cell.
+            x = a + yc
+            offset_twist = np.concatenate([cross(f["n"], x), -np.broadcast_to(f["n"], x.shape)], axis=1)
+            offset_dev = printed.at(x, swing)
+            offset_dev_rest = printed.tilt * swing
         turn = np.sqrt(sum(r**2 for r in turn_rows))
         slack = 1.0 + lever**2 / self.lever2
-        bound = np.maximum(self.lever2 * np.maximum(turn - delta, 0.0) ** 2,
-                           np.maximum(np.abs(offset[0]) - swing, 0.0) ** 2 / slack)
+        bound = np.maximum(self.lever2 * np.maximum(turn - delta - printed.tilt, 0.0) ** 2,
+                           np.maximum(np.abs(offset[0]) - swing - offset_dev, 0.0) ** 2 / slack)
         # All rows at once: the turn rows times L and the offset, over sqrt(2 + lever^2 / L^2) (module doc).
         scale = 1.0 / np.sqrt(1.0 + slack)
         L = np.sqrt(self.lever2)
         value = np.stack([L * r for r in turn_rows] + [offset[0] - np.einsum("ki,ki->k", offset[1], yc)], axis=1)
         Jw = np.stack([L * j for j in turn_jw] + [offset[2]], axis=1)
         m = np.stack([np.zeros_like(offset[1])] * len(turn_rows) + [offset[1]], axis=1)
-        remainder = np.stack([L * kappa] * len(turn_rows) + [offset_rest], axis=1)
+        remainder = np.stack([L * (kappa + delta * printed.tilt)] * len(turn_rows)
+                             + [offset_rest + offset_dev_rest], axis=1)
+        twist = np.stack([np.concatenate([L * j, np.zeros_like(j)], axis=1) for j in turn_jw] + [offset_twist], axis=1)
+        radii = np.stack([0.0 * ones] * len(turn_rows) + [radius * ones], axis=1)
         usable = np.ones(value.shape, bool)
         return bound, value * scale[:, None], Jw * scale[:, None, None], m * scale[:, None, None], \
-            remainder * scale[:, None], usable
+            remainder * scale[:, None], usable, twist * scale[:, None, None], radii * scale[:, None]
 
-    def _lines(self, ctype, s, f, rho, o, R, delta, yc, h):
+    def _lines(self, ctype, s, f, rho, o, printed, R, delta, yc, h):
         """A line (or a cylinder's axis) at ``rho`` from another."""
         c = self.centroid
         kappa = delta**2 / 2.0 + delta**3 / 6.0
@@ -156,7 +210,7 @@ class SensorBounds:
         du = np.minimum(2.0, 2.0 * delta / sine)  # how far the common normal turns over the cell
         arm = np.linalg.norm(closest - c, axis=1)
         swing = delta * arm + h + distance * du**2 / 2.0  # (x_a' - p*).u = D_c u_c.u + (x_a' - x_a'_c).u
-        least = np.maximum(np.maximum(distance - swing - rho, rho - distance - swing), 0.0)
+        least = np.maximum(distance - swing - rho, rho - distance - swing)
         # The placement centre's foot on the sensor's line, and that foot's distance from the fixture's line.
         foot = s["p"] + ((o - s["p"]) @ s["d"]) * s["d"]
         off = np.linalg.norm(o - foot)
@@ -165,7 +219,6 @@ class SensorBounds:
         low = sine - delta
         lever = np.where(low > 0.0, apart * (1.0 + 1.0 / low**2) + off, np.inf)
         slack = 1.0 + lever**2 / self.lever2
-        bound = np.where(low > 0.0, least**2 / slack, 0.0)
         # The distance (x_a' - p*).u along the common normal u signed to make it positive at the centre, p* the
         # closest point on the fixture's line: linear in (omega, y) but for u's turn and the Rodrigues remainder.
         u = np.where(signed < 0.0, -1.0, 1.0)[:, None] * m / sine[:, None]
@@ -174,11 +227,20 @@ class SensorBounds:
         foot_f = f["p"] + ((x - f["p"]) @ f["d"])[:, None] * f["d"]
         value = np.einsum("ki,ki->k", a - foot_f, u) - rho
         remainder = distance * du**2 / 2.0 + (delta * arm + kappa * arm + h) * du + kappa * arm
+        # On a printed part the row moves by -u.D(p*); p* moves by at most ``shift`` over the cell (module doc).
+        twist = np.concatenate([cross(u, foot_f), -u], axis=1)
+        if printed.tilt or printed.dev:
+            shift = lever + delta * np.linalg.norm(o - c) + h + np.linalg.norm(self._moved(o, R, yc) - foot_f, axis=1)
+            dev = printed.at(foot_f, shift)
+            least = least - dev
+            remainder = remainder + du * dev + printed.tilt * shift
+        bound = np.where(low > 0.0, np.maximum(least, 0.0) ** 2 / slack, 0.0)
         # With rho > 0 the unsigned distance is the signed one only where it keeps its sign over the cell.
         usable = (low > 0.0) & ((rho == 0.0) | (distance > swing))
         scale = 1.0 / np.sqrt(slack)
+        radius = np.full(len(delta), -1.0 if ctype.fixture == "C" else 0.0)  # the distance holds its radius
         return bound, (value * scale)[:, None], (cross(u, a) * scale[:, None])[:, None], (u * scale[:, None])[:, None], \
-            (remainder * scale)[:, None], usable[:, None]
+            (remainder * scale)[:, None], usable[:, None], (twist * scale[:, None])[:, None], (radius * scale)[:, None]
 
 
 def _side(side, count, k):

@@ -148,6 +148,7 @@ CASES = [
     Case("sphere-plate 2 per ball", "sphere-plate", (0.0, SIGMA_MM), _counts({"ball_1": 2, "ball_2": 2, "ball_3": 2})),
     # The paper's plane sensor on a plane and line sensor across an edge: bounded by their own rows.
     Case("Example One (paper plan)", "quarter-sphere", (0.0, SIGMA_MM), plan="paper"),
+    Case("Example One (paper plan), printed", "quarter-sphere", (0.0, SIGMA_MM), plan="paper", printed=True),
     Case("v-block 4-4-4, unlabelled", "v-block", (SIGMA_MM,), _counts({"groove_a": 4, "groove_b": 4, "end": 4}),
          unlabelled=True),
     # Its three poses are the images of the corner's symmetry: no touch tells them apart.

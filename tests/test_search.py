@@ -324,18 +324,21 @@ def test_the_geodesic_radius_of_a_rotation_box():
 
 
 def test_a_search_that_did_not_complete_claims_nothing():
-    """Example One's plan on the printed part, whose sensors the search does not bound (docs/registration.md),
-    is not searched completely: the result says so, with where, and its exit code is 6 whatever the status;
-    underdetermined keeps 4."""
+    """Three plane sensors lying on the cube's faces and no point touch: the search has no point to bound
+    translations by (docs/registration.md) and is not complete. The result says so, with where, and its exit
+    code is 6 whatever the status; underdetermined keeps 4."""
     from fixturecad.registration.engine import register_touches
     from fixturecad.registration.synthetic import plan_touches
     from fixturecad.registration.touchfile import exit_code
 
-    document = features_document(make("quarter-sphere"))
-    features = features_from_json(document)
-    touches, contacts = plan_touches(document["plans"]["paper"]["touch_plan"], np.eye(4))
-    result = register_touches(features, touches, contacts=contacts,
-                              tolerance=tolerance_from_document(features, document))
+    features = features_from_json(features_document(make("cube", size=50.0)))
+    plan = [{"contact": "PL/F-PL/F", "feature": face, "points": [point],
+             "sensor": {"kind": "plane", "point": point, "normal": normal}}
+            for face, point, normal in (("top", [25.0, 25.0, 50.0], [0.0, 0.0, 1.0]),
+                                        ("front", [25.0, 0.0, 25.0], [0.0, -1.0, 0.0]),
+                                        ("left", [0.0, 25.0, 25.0], [-1.0, 0.0, 0.0]))]
+    touches, contacts = plan_touches(plan, np.eye(4))
+    result = register_touches(features, touches, contacts=contacts)
     assert result["search"] == "incomplete" and "do not fix a pose" in result["search_reason"]
     assert exit_code(result) == 6
     assert exit_code({**result, "status": "underdetermined"}) == 4

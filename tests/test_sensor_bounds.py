@@ -11,6 +11,8 @@ import pytest
 
 from fixturecad.build import features_document
 from fixturecad.registration.defaults import SENSOR_LEVER_MM
+from fixturecad.registration.deviations import deviation_rows
+from fixturecad.registration.tolerance import deviated
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.features import features_from_json
 from fixturecad.registration.pose import pose_errors, random_rotation, rotation_from_vector, vector_from_rotation
@@ -20,7 +22,7 @@ from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
 
-from search_cases import _features, _fixture
+from search_cases import _features, _fixture, _tolerance
 
 CUBE = 50.0  # mm
 LONG_LEVER_MM = 1e3  # mm: far longer than the default, short enough for the whitening's regularisation
@@ -40,19 +42,37 @@ def _cube_plan():
     ]
 
 
+def _boss_plan():
+    """Point touches on the inclined plane and the boss, a line sensor across the boss and a plane sensor lying on
+    it (both at the boss's radius)."""
+    return [
+        {"feature": "plane", "points": [[0.0, 12.0, 0.0], [-10.4, -6.0, -10.4], [10.4, -6.0, 10.4]]},
+        {"feature": "cylinder", "points": [[18.79385, 6.84040, -32.0], [-15.32089, 12.85575, -44.0]]},
+        {"feature": "cylinder", "contact": "L/M-C/M", "points": [[20.0, 0.0, -40.0]], "rho": 20.0,
+         "sensor": {"kind": "line", "point": [20.0, 0.0, -40.0], "direction": [0.0, 1.0, 0.0]}},
+        {"feature": "cylinder", "contact": "PL/M-C/M", "points": [[0.0, -20.0, -30.0]], "rho": 20.0,
+         "sensor": {"kind": "plane", "point": [0.0, -20.0, -30.0], "normal": [0.0, 1.0, 0.0]}},
+    ]
+
+
 @functools.lru_cache(maxsize=None)
 def _case(name):
     """(features, touch plan) of a case: a template's named plan, a design's default plan, or the cube's above."""
     if name == "cube, line and cylinder lying on the top":
         return features_from_json(features_document(make("cube", size=CUBE))), _cube_plan()
+    if name == BOSS:
+        return features_from_json(features_document(make("inclined-plane-cylinder"))), _boss_plan()
     if name.startswith("{"):
         return _features(name), _fixture(name).touch_plans()["default"].touches
     template, plan = name.split(" ")
     return features_from_json(features_document(make(template))), make(template).touch_plans()[plan].touches
 
 
+BOSS = "inclined-plane-cylinder, line across and plane lying on the boss"
 CASES = ("quarter-sphere paper", "quarter-sphere minimal", "{R}{C-R-C}", "{R}{G3-R}",
-         "cube, line and cylinder lying on the top")
+         "cube, line and cylinder lying on the top", BOSS)
+# The cases whose sensors are searched on a printed part too: the designs' stand-ins weigh the threshold there.
+PRINTED = ("quarter-sphere paper", "quarter-sphere minimal", "cube, line and cylinder lying on the top", BOSS)
 
 
 def _touches(name, truth, rng, noise_mm):
@@ -61,12 +81,19 @@ def _touches(name, truth, rng, noise_mm):
     return perturb_touches(touches, contacts, rng, noise_mm) if noise_mm else (touches, contacts)
 
 
-def _problem(name, rng, noise_mm=0.0, lever_mm=SENSOR_LEVER_MM):
+@functools.lru_cache(maxsize=None)
+def _printed(name):
+    """The case's part as printed: the recorded tolerance of its template."""
+    return _tolerance(name.split(",")[0].split(" ")[0], _case(name)[0])
+
+
+def _problem(name, rng, noise_mm=0.0, lever_mm=SENSOR_LEVER_MM, printed=False):
     """The case's touches at a random pose: (problem, truth)."""
     truth = np.eye(4)
     truth[:3, :3], truth[:3, 3] = random_rotation(rng), rng.uniform(-80, 80, 3)
     touches, contacts = _touches(name, truth, rng, noise_mm)
-    return Problem(build_groups(_case(name)[0], touches, contacts=contacts), max(noise_mm, 0.005), lever_mm), truth
+    return Problem(build_groups(_case(name)[0], touches, contacts=contacts), max(noise_mm, 0.005), lever_mm,
+                   _printed(name) if printed else None), truth
 
 
 def _cells(rng, count, v_true, y_true):
@@ -87,9 +114,9 @@ def _samples(rng, v0, w, centre, half, count=64):
     return rotation_from_vector(v), y
 
 
-def _setting(name, lever_mm=SENSOR_LEVER_MM):
+def _setting(name, lever_mm=SENSOR_LEVER_MM, printed=False):
     rng = np.random.default_rng(7)
-    problem, truth = _problem(name, rng, 0.005, lever_mm)
+    problem, truth = _problem(name, rng, 0.005, lever_mm, printed)
     tree = stand_in_tree(problem, threshold_mm2(problem))[0]
     assert tree.sensors is not None and tree.fixes_pose
     v_true = vector_from_rotation(truth[:3, :3])
@@ -108,8 +135,8 @@ def test_the_sensor_bounds_hold_within_a_cell(name, lever_mm):
     positive = 0
     for v0, w, centre, half in _cells(rng, 300, v_true, y_true):
         R0 = rotation_from_vector(v0[None])
-        bound, value, Jw, m, remainder, _ = tree.sensors.cells(R0, np.array([np.sqrt(3) * w]), centre[None],
-                                                               np.array([np.linalg.norm(half)]))
+        bound, value, Jw, m, remainder = tree.sensors.cells(R0, np.array([np.sqrt(3) * w]), centre[None],
+                                                               np.array([np.linalg.norm(half)]))[:5]
         Rs, y = _samples(rng, v0, w, centre, half)
         r = tree.full.evaluate_batch(Rs, tree.centroid - np.einsum("kij,kj->ki", Rs, y))[0]
         sensed = tree.sensors.weight * np.sum(r[:, tree.problem.size:] ** 2, axis=1)
@@ -119,6 +146,97 @@ def test_the_sensor_bounds_hold_within_a_cell(name, lever_mm):
         assert np.all(np.sqrt(sensed) >= np.linalg.norm(model, axis=1) - np.linalg.norm(remainder[0]) - 1e-9)
         positive += bound[0] > 0.0
     assert positive >= 20, positive
+
+
+@pytest.mark.parametrize("lever_mm", [SENSOR_LEVER_MM, LONG_LEVER_MM], ids=["lever", "long lever"])
+@pytest.mark.parametrize("name", PRINTED)
+def test_the_sensor_bounds_hold_on_a_printed_part(name, lever_mm):
+    """On the part as printed (its recorded tolerance), 150 such cells with 32 poses each, each pose with a
+    deviation of the sensors' features that a pose that passes allows (``z = L u``, ``|u|^2 = q``, half along
+    the direction that moves one row most): the sensors' rows as the test takes them at the pose, ``r - J_d
+    z`` (the contact model's whitened rows and their change with the modes, :func:`.deviations.deviation_rows`),
+    are never below the cells' bound, nor below the first-order rows with the modes, ``value + Jw.omega + m.y -
+    Jz u``, less their remainders. It fails when a row's change with the modes has the wrong sign (a line's, a
+    plane's offset, either side the plane, or a radius's); it does not catch the deviation terms of the bound
+    and the remainders taken half as large (those hold loosely: a feature's move at a place is bounded by its
+    move at its mode centre plus its turn times the distance)."""
+    rng, tree, v_true, y_true = _setting(name, lever_mm, printed=True)
+    tolerance = tree.judge.tolerance
+    q = tree.root**2 / tree.problem.sigma**2
+    singles = Problem(tree.full.groups[len(tree.problem.groups):], tree.problem.sigma, tree.problem.lever)
+    rows = tree.sensors.row_touch
+    positive = 0
+    for v0, w, centre, half in _cells(rng, 150, v_true, y_true):
+        R0 = rotation_from_vector(v0[None])
+        bound, value, Jw, m, remainder, _, twist, radius = tree.sensors.cells(
+            R0, np.array([np.sqrt(3) * w]), centre[None], np.array([np.linalg.norm(half)]))
+        Jz = (np.einsum("si,sci->sc", twist[0], tree.sensor_twists[rows])
+              + radius[0][:, None] * tree.sensor_radius[rows]) @ tree.L
+        Rs, y = _samples(rng, v0, w, centre, half, 32)
+        # Deviations along one row's largest change (that row moved as far as the modes allow), or at random.
+        along = Jz[rng.integers(len(Jz), size=len(Rs))]
+        u = np.where((np.arange(len(Rs)) % 2 == 1)[:, None] & np.any(along != 0.0, axis=1, keepdims=True), along,
+                     rng.normal(size=(len(Rs), tree.L.shape[1])))
+        u *= rng.choice([-1.0, 1.0], (len(u), 1)) * np.sqrt(q) / np.linalg.norm(u, axis=1, keepdims=True)
+        z = np.zeros((len(u), tolerance.size))
+        z[:, tree.mode_index] = u @ tree.L.T
+        ts = tree.centroid - np.einsum("kij,kj->ki", Rs, y)
+        cost = np.empty(len(Rs))
+        for k, (R, t) in enumerate(zip(Rs, ts)):
+            r, J = singles.sensor_rows(R, t)
+            cost[k] = np.sum((r - deviation_rows(singles, tolerance, R, t, J) @ z[k]) ** 2)
+        assert cost.min() >= bound[0] * (1 - 1e-9) - 1e-12, (cost.min(), bound[0])
+        omega = vector_from_rotation(np.einsum("ji,kjl->kil", R0[0], Rs))  # R = R0 exp(omega)
+        model = value[0] + np.einsum("ri,ki->kr", Jw[0], omega) + np.einsum("ri,ki->kr", m[0], y) - u @ Jz.T
+        assert np.all(np.sqrt(cost) >= np.linalg.norm(model, axis=1) - np.linalg.norm(remainder[0]) - 1e-9)
+        positive += bound[0] > 0.0
+    assert positive >= 20, positive
+
+
+@pytest.mark.parametrize("name", PRINTED)
+def test_the_sensor_rows_move_with_their_printed_feature_as_modelled(name):
+    """Each sensor row's change with each mode of its feature, as the search models it (``twist`` and
+    ``radius`` at a cell of one pose), matches the rows of the same touches on the feature moved by that mode
+    (:func:`.tolerance.deviated`, an exact rigid motion and radius), by central differences, within 0.1 %: the
+    rows' scale, which the model holds fixed over a cell, moves with the feature too (times rows of a few um)."""
+    rng = np.random.default_rng(3)
+    truth = np.eye(4)
+    truth[:3, :3], truth[:3, 3] = random_rotation(rng), rng.uniform(-80, 80, 3)
+    touches, contacts = _touches(name, truth, rng, 0.005)
+    features, tolerance = _case(name)[0], _printed(name)
+
+    def sensors(features, printed, grow=0.0, fid=None):
+        # A grown feature's contacts' offsets grow with it (as the test's radius derivative takes them).
+        grown = [{**c, "rho": c["rho"] + grow} if c["feature"] == fid and "rho" in c else c for c in contacts]
+        problem = Problem(build_groups(features, touches, contacts=grown), 0.005, SENSOR_LEVER_MM,
+                          tolerance if printed else None)
+        return stand_in_tree(problem, threshold_mm2(problem))[0]
+
+    tree = sensors(features, True)
+    R0, yc = truth[:3, :3][None], (truth[:3, :3].T @ (tree.centroid - truth[:3, 3]))[None]
+    zero = np.zeros(1)
+    twist, radius = tree.sensors.cells(R0, zero, yc, zero)[6:]
+    rows = tree.sensors.row_touch
+    step = 1e-6
+    checked = 0
+    for group in np.unique(rows):
+        fid = tree.full.groups[len(tree.problem.groups) + group].feature.id
+        modes = tolerance.modes[fid]
+        for j in range(len(modes.names)):
+            moved = []
+            for sign in (1.0, -1.0):
+                coordinates = np.zeros(len(modes.names))
+                coordinates[j] = sign * step
+                # The rows at the cell's pose: value + m.y.
+                grow = coordinates @ modes.radius
+                _, value, _, m, *_ = sensors({**features, fid: deviated(modes, coordinates)}, False, grow,
+                                             fid).sensors.cells(R0, zero, yc, zero)
+                moved.append((value + np.einsum("ksi,ki->ks", m, yc))[0, rows == group])
+            measured = (moved[0] - moved[1]) / (2 * step)
+            modelled = twist[0, rows == group] @ modes.twists[j] + radius[0, rows == group] * modes.radius[j]
+            assert np.allclose(measured, modelled, rtol=0.0, atol=1e-3 * max(1.0, np.abs(modelled).max())), (fid, j)
+            checked += 1
+    assert checked >= 3
 
 
 @pytest.mark.parametrize("name", CASES)
