@@ -536,8 +536,8 @@ class Tree:
             remainder2 = remainder2 + np.sum(c.s_rem**2, axis=1)
             c.modelled = c.modelled & c.s_fine
         if self.L is not None:
-            # The part's deviations z = L u as unknowns beside y, each u held by a row sigma u (the test is
-            # min over z of |r - J_d z|^2 + sigma^2 z^T S^-1 z): the rows' change with u taken at the y box's
+            # The part's deviations z = L u as unknowns beside y, each u held by sigma u (the test is min over z
+            # of |r - J_d z|^2 + sigma^2 z^T S^-1 z): the rows' change with u taken at the y box's
             # centre, off by at most the touch's move times its feature's largest turn (and, on a round
             # feature, by its direction's turn times its deviation bound).
             touch = np.concatenate([self.row_touch, np.flatnonzero(self.round)])
@@ -560,14 +560,13 @@ class Tree:
                 change = np.einsum("ksi,sci->ksc", c.s_twist, self.sensor_twists[rows]) \
                     + c.s_radius[..., None] * self.sensor_radius[rows][None]
                 Jz = np.concatenate([Jz, change @ self.L], axis=1)
-            k = self.L.shape[1]
-            prior = np.broadcast_to(np.hstack([np.zeros((k, 3)), self.problem.sigma * np.eye(k)]), (K, k, 3 + k))
-            unit = np.concatenate([np.concatenate([unit, -Jz], axis=2), prior], axis=1)
-            Jw = np.concatenate([Jw, np.zeros((K, k, 3))], axis=1)
-            value = np.concatenate([value, np.zeros((K, k))], axis=1)
+            # u eliminated exactly: min over u of |v - Jz u|^2 + sigma^2 |u|^2 = |F v|^2 (:func:`_modes_eliminated`),
+            # the model's least and its ellipsoid's shadow on (omega, y) as with u among the unknowns.
+            rows = _modes_eliminated(Jz, self.problem.sigma, np.concatenate([value[..., None], Jw, unit], axis=2))
+            value, Jw, unit = rows[..., 0], rows[..., 1:4], rows[..., 4:]
         c.remainder = np.sqrt(remainder2)
-        c.H = np.broadcast_to(self.H_flat, (K, 3, 3)) if unit.shape[1:] == self.row_unit.shape else \
-            np.einsum("kri,krj->kij", unit, unit)
+        flat = self.L is None and self.sensors is None and not self.round.any()
+        c.H = np.broadcast_to(self.H_flat, (K, 3, 3)) if flat else np.einsum("kri,krj->kij", unit, unit)
         h, E = np.linalg.eigh(c.H)
         c.H_least = np.maximum(h[:, 0], 0.0)
         c.H_pinv = np.einsum("kij,kj,klj->kil", E, np.where(h > 1e-9 * h[:, -1:], 1.0 / np.maximum(h, 1e-300), 0.0), E)
@@ -937,6 +936,14 @@ def split(v, w, ylo, yhi, turning, relevant):
     parts.append((np.repeat(v[~turning], 2, axis=0), np.repeat(w[~turning], 2),
                   np.stack([lo, lo2], 1).reshape(-1, 3), np.stack([hi1, hi], 1).reshape(-1, 3)))
     return [np.concatenate(p) for p in zip(*parts)]
+
+
+def _modes_eliminated(Jz, sigma, rows):
+    """Rows (K, r, c) times F (K, r, r), ``F^T F = (I + Jz Jz^T / sigma^2)^-1``: a vector v of rows costs ``|F
+    v|^2 = min over u of |v - Jz u|^2 + sigma^2 |u|^2`` (Jz (K, r, k)). With ``C = sigma^2 I + Jz Jz^T = L L^T``
+    (positive definite, its least eigenvalue sigma^2), ``F = sigma L^-1``."""
+    C = np.einsum("kri,ksi->krs", Jz, Jz) + sigma**2 * np.eye(Jz.shape[1])
+    return sigma * np.linalg.solve(np.linalg.cholesky(C), rows)
 
 
 def _reduced(Jw, m, value, H_pinv):
