@@ -17,13 +17,15 @@ against the best of ``--random`` random feasible layouts of the same kind
 a random pose registered by the library (``register_touches``): noise-free
 (exact and ``unique`` expected), and with 5 um of noise (the error against
 the bound, ``inconsistent`` counted when the true pose passes the residual
-test). Run from the repository root:
+test); with ``--printed`` on the design's recorded tolerance, as its
+register.py registers by default. Run from the repository root:
 
     .venv/bin/python benchmarks/bench_design.py [--sample 12] [--seed 1]
     .venv/bin/python benchmarks/bench_design.py --all [--random 1000] [--seed 1] [--processes N]
     .venv/bin/python benchmarks/bench_design.py --classes "{T1}{S-R}" "{S}{S}{S-S}" [--random 1000]
     .venv/bin/python benchmarks/bench_design.py --classes @classes.txt  # one class a line
     .venv/bin/python benchmarks/bench_design.py --all --random 0 --no-build  # registration only
+    .venv/bin/python benchmarks/bench_design.py --all --random 0 --no-build --printed  # ... on the printed part
 
 ``--classes`` takes the listed classes end to end as ``--all`` does, each
 with the random draws it gets in ``--all`` (seeded by its place in Table V).
@@ -76,12 +78,14 @@ def register(folder: Path, rng) -> tuple[str, bool]:
 
 def end_to_end(task) -> dict:
     """One class designed, built, compared with random layouts and registered (see the module doc)."""
-    index, name, members, random_layouts, seed, build = task
+    index, name, members, random_layouts, seed, build, printed = task
+    from fixturecad.build import features_document
     from fixturecad.cad.export import export
     from fixturecad.cad.solid import fixture_solid
     from fixturecad.design.combination import for_class
     from fixturecad.design.fixture import design
     from fixturecad.design.layout import layout_plan, plan_bound, plan_information
+    from fixturecad.registration.deviations import tolerance_from_document
     from fixturecad.registration.engine import register_touches
     from fixturecad.registration.pose import pose_errors, random_rotation
     from fixturecad.registration.problem import Problem
@@ -132,15 +136,16 @@ def end_to_end(task) -> dict:
     truth = np.eye(4)
     truth[:3, :3], truth[:3, 3] = random_rotation(rng), rng.uniform(-300, 300, 3)
     by_id = {f.id: f for f in features}
+    tolerance = tolerance_from_document(by_id, features_document(fixture)) if printed else None
     touches, contacts = plan_touches(entries, truth)
-    exact = register_touches(by_id, touches, contacts=contacts)
+    exact = register_touches(by_id, touches, contacts=contacts, tolerance=tolerance)
     errors = [pose_errors(np.array(s["pose"]), truth) for s in exact["solutions"]]
     out["exact"] = exact["status"] == "unique" and bool(errors) and all(
         e <= EXACT_MM for e in min(errors, key=lambda e: e[0]))
     out["exact_status"], out["exact_search"] = exact["status"], exact["search"]
     touches, contacts = perturb_touches(touches, contacts, rng, SIGMA_MM)
-    noisy = register_touches(by_id, touches, sigma_mm=SIGMA_MM, contacts=contacts)
-    problem = Problem(build_groups(by_id, touches, contacts=contacts), SIGMA_MM)
+    noisy = register_touches(by_id, touches, sigma_mm=SIGMA_MM, contacts=contacts, tolerance=tolerance)
+    problem = Problem(build_groups(by_id, touches, contacts=contacts), SIGMA_MM, tolerance=tolerance)
     residuals, _ = problem.evaluate(truth[:3, :3], truth[:3, 3])
     dof = len(residuals) - 6
     # The rows are in mm, of covariance sigma^2 I: the test is on the cost over sigma^2 (without it, on mm^2, the
@@ -178,7 +183,8 @@ def all_classes(args) -> None:
         raise SystemExit(f"not classes of Table V: {' '.join(unknown)}")
     chosen = list(enumerate(found))[:args.limit] if args.classes is None else [
         (i, item) for i, item in enumerate(found) if item.name in args.classes]
-    tasks = [(i, item.name, item.members, args.random, args.seed, not args.no_build) for i, item in chosen]
+    tasks = [(i, item.name, item.members, args.random, args.seed, not args.no_build, args.printed)
+             for i, item in chosen]
     um = lambda b: "-" if b is None or b[0] is None else f"{b[0] * 1e3:7.1f} um {b[1] * 1e3:7.1f} mdeg"  # noqa: E731
     print("class | design: default-plan bound at 5 um | best random | D design - D random | solid, files | "
           "noise-free (search) | 5 um")
@@ -234,6 +240,8 @@ def main() -> None:
     parser.add_argument("--processes", type=int, default=os.cpu_count(), help="the pool's processes")
     parser.add_argument("--no-build", action="store_true", help="with --all or --classes: design and register only, "
                         "no solid or files (a coverage run of the registration)")
+    parser.add_argument("--printed", action="store_true", help="with --all or --classes: register on the design's "
+                        "recorded tolerance, as its register.py does by default")
     args = parser.parse_args()
     if args.all or args.classes:
         return all_classes(args)
