@@ -123,8 +123,8 @@ class SensorBounds:
         bound = self.weight * sum(np.where(np.isfinite(b), b, 0.0) for b, *_ in parts)
         value, Jw, m, remainder, usable, twist, radius = (np.concatenate([part[k] for part in parts], axis=1)
                                                           for k in range(1, 8))
-        fine = usable & np.isfinite(value) & np.isfinite(remainder) & np.all(
-            np.isfinite(Jw) & np.isfinite(m) & np.isfinite(twist[..., :3]) & np.isfinite(twist[..., 3:]), axis=2)
+        fine = usable & np.isfinite(value) & np.isfinite(remainder) & np.all(np.isfinite(Jw) & np.isfinite(m), axis=2) \
+            & np.all(np.isfinite(twist), axis=2)
         root = np.sqrt(self.weight)
         value, remainder = root * np.where(fine, value, 0.0), root * np.where(fine, remainder, 0.0)
         Jw, m = root * np.where(fine[..., None], Jw, 0.0), root * np.where(fine[..., None], m, 0.0)
