@@ -1,7 +1,7 @@
 """Issues 12 and 18's long sweep: register_touches on many seeded random layouts per case, judged against the
 brute-force enumeration of admissible poses (tests/brute_force.py, tests/search_cases.py).
 
-Run by hand: ``python benchmarks/bench_search.py [--layouts 200] [--case SUBSTRING]``. Per case and noise
+Run by hand: ``python benchmarks/bench_search.py [--layouts 200] [--case SUBSTRING] [--first 0]``. Per case and noise
 level, one row: layouts; the engine's answers by status; its failures (a wrong ``unique``, ``unique``
 with another admissible pose, ``unique`` with none, ``ambiguous`` missing an admissible pose, a false
 ``inconsistent``, a separating touch off the part or not separating); the median and largest time of
@@ -53,6 +53,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--layouts", type=int, default=200, help="random layouts per case and noise level")
     parser.add_argument("--case", default="", help="only the cases whose name contains this")
+    parser.add_argument("--first", type=int, default=0,
+                        help="the first layout's index: another value draws fresh seeds (the README's rows: 0)")
     args = parser.parse_args()
     print(f"machine: {describe()}")
     header = (["case", "layouts"] + list(STATUSES) + [name for name, _ in FAILURES]
@@ -62,7 +64,7 @@ def main():
     for case, noise_mm in VARIANTS:
         name = variant_id(case, noise_mm)
         if args.case in name:
-            print("| " + " | ".join(row(name, judge_all(case, noise_mm, args.layouts, timed=True))) + " |", flush=True)
+            print("| " + " | ".join(row(name, judge_all(case, noise_mm, args.layouts, timed=True, first=args.first))) + " |", flush=True)
 
 
 if __name__ == "__main__":
