@@ -43,7 +43,7 @@ close (``LEAF_FRACTION``). The leaves, joined where they touch, are
 from its cheapest leaves, and its *extent* (mm, from each leaf's model
 ellipsoid) bounds how far any pose of it that passes puts a touch from where
 that pose does; a region is split finer until its pose passes and its extent
-is small, or is dropped when its pose fails by more than its extent can make
+is small beside its pose's own valley of poses that pass, or is dropped when its pose fails by more than its extent can make
 up (:meth:`Tree.regions`). A search given a ``stop`` ends at the first pose it
 meets that passes but is too weakly determined to judge: that pose alone
 makes the answer underdetermined.
@@ -77,7 +77,8 @@ PARTIAL_CELLS = 50000  # cells kept in all before a search that leaves sensors' 
 REFINE_STEPS = 4  # batched Gauss-Newton steps from each region's cheapest leaves (near its model's least) ...
 REGION_STARTS = 4  # ... this many of them
 RESOLVE_ROUNDS = 3  # times an unsettled region is split finer before the search stops ...
-SETTLED_MM = 0.05  # ... a region being settled when its pose passes and its extent is at most this (mm)
+SETTLED_MM = 0.05  # ... a region being settled when its pose passes and its extent is at most this (mm) beyond
+# twice its pose's own valley (:func:`_valley_mm`)
 RANK_ROTATIONS = np.array([[0.0, 0.0, 0.0], [0.9, -0.4, 0.3], [-0.5, 1.1, 0.7]])  # rad
 NARROW_ANGLE = 4.0  # rad: a cell whose rotation vectors are shorter than this is narrowed to its model's ellipsoid ...
 NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
@@ -715,7 +716,8 @@ class Tree:
             # the cost moves by at most sqrt(n) times the largest move of a touch.
             found = [r for r in found if np.sqrt(r.cost) - np.sqrt(len(self.rho)) * r.extent_mm <= self.root]
             unsettled = [k for k, region in enumerate(found)
-                         if not region.passes or (region.extent_mm > SETTLED_MM and not fine and not partial)]
+                         if not region.passes or (region.extent_mm > SETTLED_MM + 2.0 * region.valley_mm and not fine
+                                                  and not partial)]
             if not unsettled:
                 return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept)
             # Regions that pass but reach farther than a patch's widening may be a weak pose's valley.
@@ -760,16 +762,18 @@ class Tree:
             k = first + int(np.argmin(relaxed[first:first + len(best)]))
             first += len(best)
             R, t, cost = Rs[k], ts[k], float(relaxed[k])
+            valley = 0.0
             if self.judge is not None:
-                r = self.judge.evaluate(R, t)[0]
+                r, J = self.judge.evaluate(R, t)
                 if self.L is not None and r @ r > self.root**2:  # refined on the test itself, deviations included
-                    R, t, r, _ = levenberg_marquardt(self.judge, R, t, max_iterations=REFINE_STEPS)
+                    R, t, r, J = levenberg_marquardt(self.judge, R, t, max_iterations=REFINE_STEPS)
                 cost = float(r @ r)
+                valley = _valley_mm(J, self.root**2 - cost, self.markers)
             cost += float(sensed[k])
             # How far any pose of the region that may pass puts a touch (or a sensor) from where the refined pose does.
             x_ref = (self.markers - t) @ R
             extent = float(np.max(np.linalg.norm(centre[members] - x_ref[None], axis=2) + reach[members]))
-            out.append(Region((R, t), cost <= self.root**2, extent, members, float(relaxed[k])))
+            out.append(Region((R, t), cost <= self.root**2, extent, members, float(relaxed[k]), valley))
         out.sort(key=lambda region: region.cost)
         return out
 
@@ -890,6 +894,19 @@ class Region:
     extent_mm: float
     members: np.ndarray
     cost: float
+    valley_mm: float = 0.0  # how far the poses that pass about the pose reach, to first order (:func:`_valley_mm`)
+
+
+def _valley_mm(J, room, markers):
+    """How far (mm) the twists ``theta`` with ``|J theta|^2 <= room`` (mm^2; the test's rows J (m, 6) at a pose
+    that passes, to first order: the poses that pass about it) move the points ``markers`` (n, 3), measurement
+    frame, a twist moving p by ``omega x p + v``; 0 where J leaves a motion free."""
+    F = J.T @ J
+    if room <= 0.0 or np.linalg.cond(F) >= 1e14:
+        return 0.0
+    M = np.concatenate([-_skew(markers), np.broadcast_to(np.eye(3), (len(markers), 3, 3))], axis=2)
+    spread = np.linalg.eigvalsh(M @ np.linalg.inv(F) @ M.transpose(0, 2, 1))[:, -1]
+    return float(np.sqrt(room * max(spread.max(), 0.0)))
 
 
 class Cells:

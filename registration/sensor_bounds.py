@@ -45,8 +45,10 @@ offset holds it. Each subset bound takes each row's least size less that (its la
 change at the cell's centre (``twist``, ``radius``) enters the search's first-order model with the modes as
 unknowns, off by at most how far the cell turns the row's direction times the move and turns the place it is
 taken at times ``tilt``: ``delta (dev + tilt |p - o_f|) + tilt |dp|``. The closest point p* on the fixture's
-line lies within the bound above of the placement centre's image o' at every pose of the cell (the lever),
-which moves by ``delta |o - c| + h``: so ``|dp*| <= lever + delta |o - c| + h + |o'_c - p*_c|``.
+line is where it meets the plane through the sensor's line along their common normal m (the plane's normal
+``n_P = (d_B - cos d_A) / s`` has ``n_P.d_B = s``), so its distance along the fixture's line from p*_c is
+``n_P.(a - p*_c) / s``, a the image of the sensor's closest point x_a; ``a - p*_c = (a - a_c) + D_c m_c`` and
+``n_P`` is normal to m: ``|dp*| <= (delta |x_a - c| + h + D_c |dm|) / (s_c - delta)``.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into the
 generated standalone ``register.py``.
@@ -230,7 +232,7 @@ class SensorBounds:
         # On a printed part the row moves by -u.D(p*); p* moves by at most ``shift`` over the cell (module doc).
         twist = np.concatenate([cross(u, foot_f), -u], axis=1)
         if printed.tilt or printed.dev:
-            shift = lever + delta * np.linalg.norm(o - c) + h + np.linalg.norm(self._moved(o, R, yc) - foot_f, axis=1)
+            shift = np.where(low > 0.0, (delta * arm + h + distance * du) / low, np.inf)
             dev = printed.at(foot_f, shift)
             least = least - dev
             remainder = remainder + du * dev + printed.tilt * shift
