@@ -72,6 +72,7 @@ LEAF_FRACTION = 0.25  # a leaf's first-order model is off by at most this much o
 LEAF_MM = 0.0125  # ... or this (mm), the larger, at first; a region whose pose does not pass is split finer
 MAX_CELLS = 150000  # cells at one level, or leaves in all, beyond which the search stops, not complete
 MAX_LEAVES = 60000
+CONTINUUM = f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
 MAX_LEVELS = 60  # splits of a cell before the search stops, not complete
 PARTIAL_CELLS = 50000  # cells kept in all before a search that leaves sensors' rows out stops, not complete
 REFINE_STEPS = 4  # batched Gauss-Newton steps from each region's cheapest leaves (near its model's least) ...
@@ -672,7 +673,7 @@ class Tree:
                 else np.zeros(len(c.v))
             turning = turn >= shift
             if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS or sum(len(d.v) for d in done) > MAX_LEAVES:
-                return None, f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
+                return None, CONTINUUM
             # A cell whose model pins its turn down is narrowed to it at once, the rest split.
             narrow, v_narrow, w_narrow = self.narrowed(c)
             v, w, ylo, yhi = split(c.v[~narrow], c.w[~narrow], c.ylo[~narrow], c.yhi[~narrow], turning[~narrow],
@@ -733,6 +734,9 @@ class Tree:
             if finer is None:
                 break
             leaves = Cells.joined([settled, finer])
+            if len(leaves.v) > MAX_LEAVES:  # each level's cap, over the rounds' leaves together
+                reason = CONTINUUM
+                break
         else:
             reason = "a region may hold a pose that passes far from the one found in it"
         return Regions([r.pose for r in found], [r.extent_mm for r in found], complete=False, reason=reason,
@@ -982,12 +986,18 @@ def _reduced(Jw, m, value, H_pinv):
 def _joined(v, w, ylo, yhi):
     """Labels (K,) of the connected groups of leaves whose rotation boxes and y boxes touch or overlap."""
     K = len(v)
-    order = np.argsort(v[:, 0])
+    # Candidates: leaves whose intervals on one axis of the six overlap, found in the order of their lower ends
+    # (a block of pairs at a time), on the axis that leaves fewest.
+    low = np.concatenate([v - w[:, None], ylo], axis=1)
+    high = np.concatenate([v + w[:, None], yhi], axis=1)
+    best = None
+    for axis in range(6):
+        order = np.argsort(low[:, axis], kind="stable")
+        count = np.searchsorted(low[order, axis], high[order, axis] + 1e-9, side="right") - np.arange(K)
+        if best is None or count.sum() < best[1].sum():
+            best = order, count
+    order, count = best
     v, w, ylo, yhi = v[order], w[order], ylo[order], yhi[order]
-    # Candidates: leaves whose first rotation coordinate is near enough, found in the sorted order, a block of
-    # pairs at a time.
-    last = np.searchsorted(v[:, 0], v[:, 0] + w + w.max() + 1e-9, side="right")
-    count = last - np.arange(K)
     ends = np.cumsum(count)
     pairs = []
     for lo in range(0, K, 256):
