@@ -152,10 +152,7 @@ def stand_in_tree(problem, threshold):
     divided by their factor (:mod:`.stand_ins`), and the sensors with no stand-in that it bounds by their own
     rows (:mod:`.sensor_bounds`); and the number of sensor touches not searched in full."""
     groups, kappa2, left, found, without = stand_ins(problem, threshold)
-    # On a printed part the test takes the sensors' rows with the touches' (their deviations shared): not where
-    # stand-ins weigh the threshold or lie off their sensors' features.
-    judged = problem.tolerance is None or (kappa2 == 1.0 and all(one.own for one in found))
-    sensors = [(g, k) for g, k in without if bounded(g)] if judged else []
+    sensors = [(g, k) for g, k in without if bounded(g)]
     problem = Problem(groups, problem.sigma, problem.lever, problem.tolerance)
     return Tree(problem, threshold / kappa2, None, found, sensors, 1.0 / kappa2), left - len(sensors)
 
@@ -758,8 +755,13 @@ class Tree:
         Rs, ts = self.refined(start_R[picks], self.centroid - np.einsum("kij,kj->ki", start_R[picks], start_y[picks]))
         relaxed = self.relaxed_cost(Rs, ts)
         # The bounded sensors' cost (their rows after the touches'), weighted as their bounds are.
-        sensed = 0.0 if not self.sensors_apart else self.sensors.weight * np.sum(
-            self.full.evaluate_batch(Rs, ts)[0][:, self.problem.size:] ** 2, axis=1)
+        sensed = 0.0
+        if self.sensors_apart and self.judge is None:  # a printed part: the bound at the pose, deviations less
+            sensed = self.sensors.cells(Rs, np.zeros(len(Rs)), np.einsum("kji,kj->ki", Rs, self.centroid - ts),
+                                        np.zeros(len(Rs)))[0]
+        elif self.sensors_apart:
+            sensed = self.sensors.weight * np.sum(self.full.evaluate_batch(Rs, ts)[0][:, self.problem.size:] ** 2,
+                                                  axis=1)
         sensed = np.broadcast_to(sensed, relaxed.shape)
         out, first = [], 0
         for best, members in groups:

@@ -173,6 +173,9 @@ CASES = [
     # sensors round a boss, or a plane sensor lying on it.
     Case("{R}{C-R-C} design (default plan)", "{R}{C-R-C}", (0.0, SIGMA_MM), plan="default"),
     Case("{R}{G3-R} design (default plan)", "{R}{G3-R}", (0.0, SIGMA_MM), plan="default"),
+    # The same on the printed part, beside the balls' stand-ins (off their faces, at the balls' centres).
+    Case("{R}{C-R-C} design (default plan), printed", "{R}{C-R-C}", (0.0, SIGMA_MM), plan="default", printed=True),
+    Case("{R}{G3-R} design (default plan), printed", "{R}{G3-R}", (0.0, SIGMA_MM), plan="default", printed=True),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
