@@ -43,8 +43,8 @@ close (``LEAF_FRACTION``). The leaves, joined where they touch, are
 from its cheapest leaves, and its *extent* (mm, from each leaf's model
 ellipsoid) bounds how far any pose of it that passes puts a touch from where
 that pose does; a region is split finer until its pose passes and its extent
-is small beside its pose's own valley of poses that pass, or is dropped when its pose fails by more than its extent can make
-up (:meth:`Tree.regions`). A search given a ``stop`` ends at the first pose it
+is small beside its pose's own valley of poses that pass, or is dropped when
+its pose fails by more than its extent can make up (:meth:`Tree.regions`). A search given a ``stop`` ends at the first pose it
 meets that passes but is too weakly determined to judge: that pose alone
 makes the answer underdetermined.
 
@@ -756,7 +756,7 @@ class Tree:
         relaxed = self.relaxed_cost(Rs, ts)
         # The bounded sensors' cost (their rows after the touches'), weighted as their bounds are.
         sensed = 0.0
-        if self.sensors_apart and self.judge is None:  # a printed part: the bound at the pose, deviations less
+        if self.sensors_apart and self.printed is not None:  # a printed part: the bound at the pose, deviations less
             sensed = self.sensors.cells(Rs, np.zeros(len(Rs)), np.einsum("kji,kj->ki", Rs, self.centroid - ts),
                                         np.zeros(len(Rs)))[0]
         elif self.sensors_apart:
