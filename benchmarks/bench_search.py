@@ -54,7 +54,7 @@ def main():
     parser.add_argument("--layouts", type=int, default=200, help="random layouts per case and noise level")
     parser.add_argument("--case", default="", help="only the cases whose name contains this")
     parser.add_argument("--first", type=int, default=0,
-                        help="the first layout's index: another value draws fresh seeds (the README's rows: 0)")
+                        help="the first layout's index: another draws fresh seeds (the README's rows: 0 and 1000)")
     args = parser.parse_args()
     print(f"machine: {describe()}")
     header = (["case", "layouts"] + list(STATUSES) + [name for name, _ in FAILURES]
@@ -64,7 +64,8 @@ def main():
     for case, noise_mm in VARIANTS:
         name = variant_id(case, noise_mm)
         if args.case in name:
-            print("| " + " | ".join(row(name, judge_all(case, noise_mm, args.layouts, timed=True, first=args.first))) + " |", flush=True)
+            outcomes = judge_all(case, noise_mm, args.layouts, timed=True, first=args.first)
+            print("| " + " | ".join(row(name, outcomes)) + " |", flush=True)
 
 
 if __name__ == "__main__":

@@ -44,9 +44,9 @@ from its cheapest leaves, and its *extent* (mm, from each leaf's model
 ellipsoid) bounds how far any pose of it that passes puts a touch from where
 that pose does; a region is split finer until its pose passes and its extent
 is small beside its pose's own valley of poses that pass, or is dropped when
-its pose fails by more than its extent can make up (:meth:`Tree.regions`). A search given a ``stop`` ends at the first pose it
-meets that passes but is too weakly determined to judge: that pose alone
-makes the answer underdetermined.
+its pose fails by more than its extent can make up (:meth:`Tree.regions`). A
+search given a ``stop`` ends at the first pose it meets that passes but is too
+weakly determined to judge: that pose alone makes the answer underdetermined.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
