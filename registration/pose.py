@@ -17,8 +17,19 @@ ORTHONORMAL_TOLERANCE = 1e-6  # largest |R^T R - I| entry accepted in a given 4x
 
 
 def skew(w):
-    """The cross-product matrix of ``w`` (3,): ``skew(w) @ x == cross(w, x)``."""
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    """The cross-product matrices (..., 3, 3) of ``w`` (..., 3): ``skew(w) @ x == cross(w, x)``."""
+    w = np.asarray(w, dtype=np.float64)
+    z = np.zeros(w.shape[:-1])
+    x, y, u = w[..., 0], w[..., 1], w[..., 2]
+    return np.stack([np.stack([z, -u, y], -1), np.stack([u, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def point_covariances(points, twist_covariance):
+    """The covariances (n, 3, 3) of the points (n, 3) moved by a spatial twist ``(omega, v)`` of covariance
+    (6, 6): a twist moves p by ``omega x p + v``."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    M = np.concatenate([-skew(points), np.broadcast_to(np.eye(3), (len(points), 3, 3))], axis=2)
+    return M @ twist_covariance @ M.transpose(0, 2, 1)
 
 
 def rotation_from_vector(omega):

@@ -61,7 +61,7 @@ from .deviations import largest_row_variance
 from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
 from .patches import box_corners, patch_box, patch_points
-from .pose import rotation_from_vector, vector_from_rotation
+from .pose import point_covariances, rotation_from_vector, skew, vector_from_rotation
 from .problem import Problem, _subset
 from .sensor_bounds import Printed, SensorBounds, bounded
 from .stand_ins import deviation_bound_mm, stand_ins
@@ -816,7 +816,7 @@ class Tree:
         kappa = (c.delta**2 / 2.0 + c.delta**3 / 6.0)[:, None] * self.marker_rho[None]
         # Touch i at a_i + a_i x omega + y + e_i, |e_i| <= kappa_i: over the ellipsoid, within
         # sqrt(slack lambda_max(B_i W B_i^T)) + kappa_i of its image at theta*, B_i = [a_i x, I].
-        B = np.concatenate([_skew(a), np.broadcast_to(np.eye(3), a.shape + (3,))], axis=3)  # (K, n, 3, 6)
+        B = np.concatenate([skew(a), np.broadcast_to(np.eye(3), a.shape + (3,))], axis=3)  # (K, n, 3, 6)
         spread = np.sqrt(slack[:, None] * np.linalg.eigvalsh(np.einsum("knij,kjl,knml->knim", B, W[:, :6, :6], B))[..., -1])
         image = a + cross(a, theta[:, None, :3]) + theta[:, None, 3:6]
         # Where the model leaves a motion free: the cell, every turn within delta and every y in its box.
@@ -910,8 +910,7 @@ def _valley_mm(J, room, markers):
     F = J.T @ J
     if room <= 0.0 or np.linalg.cond(F) >= 1e14:
         return 0.0
-    M = np.concatenate([-_skew(markers), np.broadcast_to(np.eye(3), (len(markers), 3, 3))], axis=2)
-    spread = np.linalg.eigvalsh(M @ np.linalg.inv(F) @ M.transpose(0, 2, 1))[:, -1]
+    spread = np.linalg.eigvalsh(point_covariances(markers, np.linalg.inv(F)))[:, -1]
     return float(np.sqrt(room * max(spread.max(), 0.0)))
 
 
@@ -934,13 +933,6 @@ class Cells:
         for name in vars(parts[0]):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
         return out
-
-
-def _skew(a):
-    """The matrices (..., 3, 3) of ``a x``: ``_skew(a) @ w = a x w``."""
-    z = np.zeros(a.shape[:-1])
-    x, y, w = a[..., 0], a[..., 1], a[..., 2]
-    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
 
 
 def split(v, w, ylo, yhi, turning, relevant):

@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 
 from .mobility import matrix_rank
-from .pose import fixture2meas_from_rt, rotation_angle, skew
+from .pose import fixture2meas_from_rt, point_covariances, rotation_angle
 
 CHI2_CONFIDENCE = 0.999  # residual test: a correct pose passes 999 times in 1000
 EXTENT_TOLERANCE_MM = 0.2  # how far outside a feature's patch a touch may be judged to lie
@@ -120,10 +120,9 @@ def touch_spreads(problem, jacobian):
     twist_cov = problem.sigma**2 * np.linalg.inv(F)
     spreads = {}
     for g in _placed(problem):
-        for index, point in zip(g.index, g.centre):
-            # A spatial twist moves the touch's fixture point p by omega x p + v.
-            J = np.hstack([-skew(point), np.eye(3)])
-            spreads[int(index)] = EXTENT_SIGMAS * np.sqrt(max(np.trace(J @ twist_cov @ J.T), 0.0))
+        variances = np.trace(point_covariances(g.centre, twist_cov), axis1=1, axis2=2)
+        for index, variance in zip(g.index, variances):
+            spreads[int(index)] = EXTENT_SIGMAS * np.sqrt(max(variance, 0.0))
     return spreads
 
 
