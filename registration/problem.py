@@ -148,7 +148,7 @@ class Problem:
             if keep.all():
                 groups.append(g)
             elif keep.any():
-                groups.append(_subset(g, keep))
+                groups.append(subset(g, keep))
         return Problem(groups, self.sigma, self.lever, self.tolerance)
 
     def scale(self):
@@ -199,7 +199,8 @@ def _merge(groups):
     return batches
 
 
-def _subset(group, keep):
+def subset(group, keep):
+    """The group of only the touches ``keep`` (indices into it)."""
     def cut(side):
         geometry = {}
         for key, value in side.geometry.items():

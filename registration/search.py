@@ -62,7 +62,7 @@ from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
 from .patches import box_corners, patch_box, patch_points
 from .pose import point_covariances, rotation_from_vector, skew, vector_from_rotation
-from .problem import Problem, _subset
+from .problem import Problem, subset
 from .sensor_bounds import Printed, SensorBounds, bounded
 from .stand_ins import deviation_bound_mm, stand_ins
 from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
@@ -183,7 +183,7 @@ class Tree:
         groups = [g for g in problem.groups if g.points is not None]
         self.problem = Problem(groups, problem.sigma, problem.lever)
         # Every row the search bounds, sensors' included: what fixes the pose, and what regions' poses are refined on.
-        singles = [_subset(g, np.array([k])) for g, k in sensors]
+        singles = [subset(g, np.array([k])) for g, k in sensors]
         self.full = Problem(groups + singles, problem.sigma, problem.lever)
         self.sensors = None
         # The test, deviations and all, with the bounded sensors unless their cost is weighed apart; with stand-ins

@@ -57,7 +57,7 @@ generated standalone ``register.py``.
 import numpy as np
 
 from .elements import cross
-from .stand_ins import _rows
+from .stand_ins import touch_side
 
 LINE_KINDS = ("L", "C")  # elements whose core is a line
 
@@ -99,8 +99,9 @@ class SensorBounds:
         self.lever2 = float(lever_mm) ** 2
         self.centroid = np.asarray(centroid, float)
         self.weight = float(weight)
-        self.touches = [(group.ctype, _side(group.sensor, group.count, k), _side(group.fixture, group.count, k),
-                         float(group.rho[k]), np.asarray(group.centre[k], float)) for group, k in touches]
+        self.touches = [(group.ctype, touch_side(group.sensor, group.count, k),
+                         touch_side(group.fixture, group.count, k), float(group.rho[k]),
+                         np.asarray(group.centre[k], float)) for group, k in touches]
         self.printed = [EXACT] * len(touches) if printed is None else list(printed)
         # Where the sensors are placed (measurement frame): the points a region's extent follows besides the touches.
         self.markers = np.array([o for *_, o in self.touches]).reshape(-1, 3)
@@ -243,8 +244,3 @@ class SensorBounds:
         radius = np.full(len(delta), -1.0 if ctype.fixture == "C" else 0.0)  # the distance holds its radius
         return bound, (value * scale)[:, None], (cross(u, a) * scale[:, None])[:, None], (u * scale[:, None])[:, None], \
             (remainder * scale)[:, None], usable[:, None], (twist * scale[:, None])[:, None], (radius * scale)[:, None]
-
-
-def _side(side, count, k):
-    """Touch k's geometry of a side: {key: (3,) or scalar}."""
-    return {key: value[k] for key, value in _rows(side.geometry, count).items()}

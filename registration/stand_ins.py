@@ -104,8 +104,7 @@ def stand_ins(problem, threshold):
 def stand_in(group, k, threshold, lever_mm):
     """Touch k of a sensor group's :class:`StandIn`, or None (module doc)."""
     ctype, feature = group.ctype, group.feature
-    s = {key: value[k] for key, value in _rows(group.sensor.geometry, group.count).items()}
-    f = {key: value[k] for key, value in _rows(group.fixture.geometry, group.count).items()}
+    s, f = touch_side(group.sensor, group.count, k), touch_side(group.fixture, group.count, k)
     rho = float(group.rho[k])
     plain = is_point_sensor(group.sensor)
     name = f"{feature.id}#{int(group.index[k])}"
@@ -215,7 +214,8 @@ def _centred(rho, threshold, lever_mm, plain):
     return None
 
 
-def _rows(geometry, count):
-    """A side's geometry with each key broadcast to one row per touch: (count, 3) or (count,)."""
-    return {key: np.broadcast_to(np.reshape(value, (-1, 3)), (count, 3)) if key in POINT_KEYS | DIRECTION_KEYS
-            else np.broadcast_to(np.reshape(value, -1), (count,)) for key, value in geometry.items()}
+def touch_side(side, count, k):
+    """Touch k's geometry of a side of a group of ``count`` touches: {key: (3,) or scalar}, each key given once
+    for the group or once a touch."""
+    return {key: (np.broadcast_to(np.reshape(value, (-1, 3)), (count, 3)) if key in POINT_KEYS | DIRECTION_KEYS
+                  else np.broadcast_to(np.reshape(value, -1), (count,)))[k] for key, value in side.geometry.items()}
