@@ -118,11 +118,11 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     if best.rank < 6:
         status = "underdetermined"
         result["free_motions"] = free_motions(problem, best, features)
-    elif any(s.weak for s in good) or any(s.wide and s.passes and s.rank == 6 for s in solutions):
+    elif any(s.weak for s in good) or any(s.wide and s.passes for s in solutions):
         # A pose that passes but too poorly determined to tell on which patch a touch lies, or a region of poses
-        # that may pass wider than that: no pose is claimed.
+        # that may pass wider than that, whatever its listed pose's rank or patches: no pose is claimed.
         status = "underdetermined"
-        best = next(s for s in good + solutions if s.weak or (s.wide and s.passes and s.rank == 6))
+        best = next(s for s in good + solutions if s.weak or (s.wide and s.passes))
         result["free_motions"] = free_motions(problem, best, features, weak=True)
     elif len(good) == 1:
         status = "unique"

@@ -16,7 +16,7 @@ from .least_squares import levenberg_marquardt
 from .pose import check_fixture2meas
 from .search import mahalanobis, search, threshold_mm2
 from .starts import best_starts, initial_poses
-from .verdict import EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, judged, same_pose
+from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, inadmissible, judged, same_pose
 
 LOCAL_STARTS = 96  # closed-form starts refined when the search does not complete
 
@@ -72,7 +72,10 @@ def solve(problem, initial_pose=None, complete=True, found=None):
         if k < len(extents):
             # The region's extent about where the search left it, and how far refinement moved the touches.
             reach.append(extents[k] + _moved_mm(problem, (R, t), (R2, t2)))
-            solution.wide = reach[-1] > EXTENT_WIDENING_MAX_MM
+            # Wide: some pose of the region that may pass lies too far from this one to be judged by it, unless
+            # this pose puts a touch farther off its patch than the region reaches (then none of it is admissible).
+            solution.wide = reach[-1] > EXTENT_WIDENING_MAX_MM and not inadmissible(
+                problem, R2, t2, tolerance=EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + reach[-1], approaches=False)
         solutions.append(solution)
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
     if solutions.complete and not extents and any(s.good for s in solutions):

@@ -126,16 +126,16 @@ def touch_spreads(problem, jacobian):
     return spreads
 
 
-def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_TOLERANCE_MM):
+def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_TOLERANCE_MM, approaches=True):
     """Touch indices that cannot have happened at this pose.
 
     A touch is inadmissible when its contact (a probe's point, a ball's
     centre, a sensor's known contact point), mapped into the fixture frame,
-    lies off the feature's finite patch, or when the probe's approach
-    direction (if known) points along the outward surface normal there. With
-    the touches' ``spreads`` (:func:`touch_spreads`), the patch is widened by
-    each, at most by ``EXTENT_WIDENING_MAX_MM``, so a poorly determined pose is
-    not refused for its own uncertainty.
+    lies off the feature's finite patch, or (``approaches``) when the probe's
+    approach direction (if known) points along the outward surface normal
+    there. With the touches' ``spreads`` (:func:`touch_spreads`), the patch is
+    widened by each, at most by ``EXTENT_WIDENING_MAX_MM``, so a poorly
+    determined pose is not refused for its own uncertainty.
     """
     bad = set()
     for g in _placed(problem):
@@ -145,7 +145,7 @@ def inadmissible(problem, rotation, translation, spreads=None, tolerance=EXTENT_
             slack = tolerance + np.minimum([spreads[int(i)] for i in g.index], EXTENT_WIDENING_MAX_MM)
         inside = np.asarray(g.feature.contains(local, slack))
         bad.update(int(i) for i in g.index[~inside])
-        if g.approach is not None and g.feature.surface:
+        if approaches and g.approach is not None and g.feature.surface:
             outward = g.feature.normal_at(local) @ rotation.T
             away = np.einsum("ij,ij->i", outward, g.approach) > 0.0
             bad.update(int(i) for i in g.index[away & np.all(np.isfinite(g.approach), axis=1)])

@@ -7,7 +7,7 @@ runs the same judge on many more.
 
 import pytest
 
-from search_cases import VARIANTS, judge_all, variant_id
+from search_cases import VARIANTS, judge, judge_all, variant_id
 
 LAYOUTS = 4  # per variant in the normal suite; the benchmark runs many more ...
 ISSUE_LAYOUTS = 30  # ... and the three kinds of layout that missed poses (issue 18) this many, so that a 3 % miss
@@ -47,3 +47,14 @@ def test_never_a_confident_wrong_pose(case, noise_mm, first, layouts):
     failures["search not complete"] = [(first + k, o.status) for k, o in enumerate(outcomes)
                                        if o.search != "complete" and o.status != "underdetermined"]
     assert {check: found for check, found in failures.items() if found} == {}
+
+
+def test_a_wide_region_listed_off_its_patches_is_not_called_inconsistent():
+    """Layout 1114 of the near-degenerate 3-2-1 cube at 5 um (fresh seeds, on feb4b2c: the only false
+    ``inconsistent`` of 8,600 layouts): its touches leave a valley of poses 60 mm long that pass, the true pose
+    among them, and the search's regions there are listed at poses that put a touch off its patch (one at rank
+    5). A region may hold admissible poses wherever its listed pose lies within its reach of the patches:
+    the answer is ``underdetermined``, not ``inconsistent``."""
+    case = next(c for c, _ in VARIANTS if c.name == "near-degenerate 3-2-1 cube")
+    outcome = judge(case, 0.005, 1114)
+    assert outcome.status == "underdetermined" and not outcome.false_underdetermined, outcome
