@@ -51,7 +51,7 @@ def test_never_a_confident_wrong_pose(case, noise_mm, first, layouts):
 
 def test_a_wide_region_listed_off_its_patches_is_not_called_inconsistent():
     """Layout 1114 of the near-degenerate 3-2-1 cube at 5 um (fresh seeds, on feb4b2c: the only false
-    ``inconsistent`` of 8,600 layouts): its touches leave a valley of poses 60 mm long that pass, the true pose
+    ``inconsistent`` of 6,200 layouts): its touches leave a valley of poses 60 mm long that pass, the true pose
     among them, and the search's regions there are listed at poses that put a touch off its patch (one at rank
     5). A region may hold admissible poses wherever its listed pose lies within its reach of the patches:
     the answer is ``underdetermined``, not ``inconsistent``."""
