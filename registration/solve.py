@@ -14,6 +14,7 @@ import numpy as np
 
 from .least_squares import levenberg_marquardt
 from .pose import check_fixture2meas
+from .problem import Problem
 from .search import mahalanobis, search, threshold_mm2
 from .starts import best_starts, initial_poses
 from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, inadmissible, judged, same_pose
@@ -63,6 +64,9 @@ def solve(problem, initial_pose=None, complete=True, found=None):
         starts = starts + best_starts(problem, initial_poses(problem))[0][:LOCAL_STARTS]
     length = problem.scale()
     reach = []
+    # The touches a region's extent follows, point and ball touches: one of them off its patch by more than the
+    # region reaches shows that no pose of it is admissible.
+    followed = Problem([g for g in problem.groups if g.points is not None], problem.sigma, problem.lever)
     for k, (R, t) in enumerate(starts):
         known = [(s.rotation, s.translation) for s in solutions]
         R2, t2, r, J = levenberg_marquardt(problem, R, t, known=known)
@@ -73,9 +77,9 @@ def solve(problem, initial_pose=None, complete=True, found=None):
             # The region's extent about where the search left it, and how far refinement moved the touches.
             reach.append(extents[k] + _moved_mm(problem, (R, t), (R2, t2)))
             # Wide: some pose of the region that may pass lies too far from this one to be judged by it, unless
-            # this pose puts a touch farther off its patch than the region reaches (then none of it is admissible).
+            # this pose puts a point or ball touch farther off its patch than the region reaches (then none is).
             solution.wide = reach[-1] > EXTENT_WIDENING_MAX_MM and not inadmissible(
-                problem, R2, t2, tolerance=EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + reach[-1], approaches=False)
+                followed, R2, t2, tolerance=EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + reach[-1], approaches=False)
         solutions.append(solution)
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
     if solutions.complete and not extents and any(s.good for s in solutions):
