@@ -65,8 +65,9 @@ def solve(problem, initial_pose=None, complete=True, found=None):
     length = problem.scale()
     reach = []
     # The touches a region's extent follows, point and ball touches: one of them off its patch by more than the
-    # region reaches shows that no pose of it is admissible.
-    followed = Problem([g for g in problem.groups if g.points is not None], problem.sigma, problem.lever)
+    # region reaches shows that no pose of it is admissible. (Only where there are regions: not on a nominal pose.)
+    followed = Problem([g for g in problem.groups if g.points is not None], problem.sigma, problem.lever) \
+        if extents else None
     for k, (R, t) in enumerate(starts):
         known = [(s.rotation, s.translation) for s in solutions]
         R2, t2, r, J = levenberg_marquardt(problem, R, t, known=known)
