@@ -664,8 +664,9 @@ class Tree:
             c = c.take(~leaf)
             if not len(c.v):
                 return Cells.joined(done), ""
-            # A turn that moves the touches more than the round touches' y box is wide is split first.
-            turn = c.delta * self.rho.max()
+            # A turn that moves the touches, or the bounded sensors' placement centres, more than the round touches'
+            # y box is wide is split first (a sensor far from the touches pins the turn down).
+            turn = c.delta * self.marker_rho.max()
             shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) if self.round.any() \
                 else np.zeros(len(c.v))
             turning = turn >= shift

@@ -26,7 +26,9 @@ largest over the subsets below, each row's least size over the cell over a bound
 * the distance of two lines, ``|(p_A - p_B).m| - rho``, ``m`` the unit common normal: at the cell's centre
   the closest point ``x_a`` on the sensor's line, ``D_c`` the distance, ``p*`` the closest on the fixture's;
   the distance is ``|(x_a' - p*).m|`` (any points of the two lines will do), and ``x_a'_c - p* = D_c m_c``,
-  so it moves by at most ``delta |x_a - c| + h + D_c |dm|^2 / 2`` with ``|dm| <= min(2, 2 delta / s_c)``
+  so it moves by at most ``delta |x_a - c| + h + D_c |dm|^2 / 2``, ``dm`` the unit normal's change: ``m = d_A' x d_B``
+  moves by at most delta, so while ``delta < s_c`` its direction turns by at most ``asin(delta / s_c)`` and
+  ``|dm| <= 2 sin(asin(delta / s_c) / 2)`` (else 2)
   (``s_c = |d_A' x d_B|`` the sine of their angle, moved at most ``delta``); a shift moves it one for one and a turn about ``o`` by at most ``|x_b - o'|`` (``x_b`` the
   closest point on the fixture's line, by the envelope theorem), ``<= D_o (1 + 1/s^2) + e_o`` (``D_o`` the
   distance of ``o``'s foot on the sensor's line from the fixture's line, ``e_o`` that of ``o`` from its
@@ -210,7 +212,8 @@ class SensorBounds:
         closest = s["p"][None] + t[:, None] * s["d"][None]  # measurement frame
         signed = np.einsum("ki,ki->k", p - f["p"], m) / sine
         distance = np.abs(signed)
-        du = np.minimum(2.0, 2.0 * delta / sine)  # how far the common normal turns over the cell
+        # How far the common normal turns over the cell: m moves by at most delta, its direction by asin(delta / s).
+        du = np.where(delta < sine, 2.0 * np.sin(0.5 * np.arcsin(np.minimum(delta / sine, 1.0))), 2.0)
         arm = np.linalg.norm(closest - c, axis=1)
         swing = delta * arm + h + distance * du**2 / 2.0  # (x_a' - p*).u = D_c u_c.u + (x_a' - x_a'_c).u
         least = np.maximum(distance - swing - rho, rho - distance - swing)

@@ -174,7 +174,7 @@ def test_the_sensor_bounds_hold_on_a_printed_part(name, lever_mm):
     Jz u``, less their remainders. It fails when a row's change with the modes has the wrong sign (a line's, a
     plane's offset, either side the plane, or a radius's); the bound's deviation terms taken half as large are
     caught by the next test, the remainders' by :func:`test_a_locus_rows_model_is_off_by_its_deviation_remainder_at_worst`
-    (a plane's or a line's lying on a feature; not two lines': see there)."""
+    and :func:`test_two_lines_model_is_off_by_its_deviation_remainder_at_worst`."""
     rng, tree, v_true, y_true = _setting(name, lever_mm, printed=True)
     tolerance = tree.judge.tolerance
     q = tree.root**2 / tree.problem.sigma**2
@@ -326,9 +326,7 @@ def test_a_locus_rows_model_is_off_by_its_deviation_remainder_at_worst(name):
     and the feature, lies within its remainder of the model, and comes within 10 % of it: the remainder's
     deviation terms (``delta * tilt`` of a turn row, ``delta * dev`` of a plane sensor's offset, ``tilt * swing``
     of a line's) are as large as needed and no larger; halving any one fails this test. A lever of 1e9 mm leaves
-    the rows unscaled by the whitening but for the model's common 1/sqrt(2). (Two lines' deviation terms are not
-    tight this way: they take the common normal's turn as ``2 delta / s``, a chord bound that holds for any turn,
-    twice what a small turn reaches.)"""
+    the rows unscaled by the whitening but for the model's common 1/sqrt(2). (Two lines': the next test.)"""
     rng, tree, v_true, y_true = _setting(name)
     loci = [(g, k) for g, k in stand_ins(tree.full, tree.root**2)[4] if g.ctype.is_locus]
     assert loci
@@ -396,6 +394,49 @@ def test_a_locus_rows_model_is_off_by_its_deviation_remainder_at_worst(name):
         assert np.all(worst >= 0.9), worst
         rows_checked += len(worst)
     assert rows_checked >= 2
+
+
+@pytest.mark.parametrize("name", ["quarter-sphere paper", "{R}{C-R-C}", BOSS])
+def test_two_lines_model_is_off_by_its_deviation_remainder_at_worst(name):
+    """Two lines' distance on a fixture line that moves by up to 50 um: in 60 small cells (turns of 1 urad to
+    0.1 mrad), at the turn that swings the common normal farthest (the sensor's direction turned along the normal)
+    and the move along the normal's change, the row, computed here from the lines, lies within its remainder of the
+    model, and comes within 10 % of it: the normal's turn bound, ``2 sin(asin(delta / s) / 2)``, is what a small
+    turn reaches (the chord bound ``2 delta / s`` came within 50 % here), and halving the deviation's term ``du *
+    dev`` fails this test. A lever of 1e9 mm leaves the row unscaled by the whitening."""
+    rng, tree, v_true, y_true = _setting(name)
+    lines = [(g, k) for g, k in stand_ins(tree.full, tree.root**2)[4] if not g.ctype.is_locus]
+    assert lines
+    dev = 0.05  # mm
+    for g, k in lines:
+        bounds = SensorBounds([(g, k)], 1e9, tree.centroid)
+        _, s, f, rho, _ = bounds.touches[0]
+        bounds.printed = [Printed(0.0, dev, f["p"])]
+        worst = 0.0
+        for _ in range(60):
+            R0 = rotation_from_vector(v_true + rng.uniform(-0.01, 0.01, 3))
+            yc = y_true + rng.uniform(-1.0, 1.0, 3)
+            delta = np.exp(rng.uniform(np.log(1e-6), np.log(1e-4)))
+            _, value, Jw, m, remainder, usable, twist, _ = bounds.cells(R0[None], np.array([delta]), yc[None],
+                                                                        np.array([1e-6]))
+            assert usable[0]
+            u_c = -twist[0, 0, 3:]  # the model's twist column of v is -u at the cell's centre
+            d_c = s["d"] @ R0
+            for sign in (1.0, -1.0):
+                # The sensor's direction turned by delta along u_c: the common normal swings by delta / s.
+                omega = sign * delta * _unit(np.cross(u_c, d_c))
+                R = R0 @ rotation_from_vector(omega)
+                d = s["d"] @ R
+                u = _unit(np.cross(d, f["d"]))
+                u *= np.sign(u @ u_c)
+                v_f = -dev * _unit(u - u_c)  # the fixture line's move along the normal's change
+                p = (s["p"] - tree.centroid) @ R + yc
+                row = (p - f["p"]) @ u - rho - u @ v_f
+                model = value[0, 0] + Jw[0, 0] @ omega + m[0, 0] @ yc + twist[0, 0] @ np.concatenate([np.zeros(3), v_f])
+                off = abs(model - row)
+                assert off <= remainder[0, 0] + 1e-9, (off, remainder[0, 0])
+                worst = max(worst, off / remainder[0, 0])
+        assert worst >= 0.9, worst
 
 
 @pytest.mark.parametrize("name", PRINTED)
