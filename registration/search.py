@@ -274,9 +274,11 @@ class Tree:
             self.Q = np.column_stack([e1, e2, self.direction[lines[0]]])
         self.aligned = self.round & (self.core == "line") & np.all(
             np.isclose(self.direction, self.Q[:, 2]) | np.isclose(self.direction, -self.Q[:, 2]), axis=1)
-        # The y box's axes a round touch's distance depends on: all three, or across an aligned axis.
+        # The y box's axes a round touch's distance depends on: all three, or across an aligned axis; a bounded
+        # sensor's bound depends on all three (it holds the box's half-diagonal), and on them even beside flat
+        # touches only, whose bound takes the least over the box itself.
         self.relevant = np.ones(3, bool)
-        if self.round.any() and self.aligned[self.round].all():
+        if self.round.any() and self.aligned[self.round].all() and self.sensors is None:
             self.relevant[2] = False
 
     def modes(self, groups, tolerance, q, stand_ins, sensors):
@@ -667,8 +669,8 @@ class Tree:
             # A turn that moves the touches, or the bounded sensors' placement centres, more than the round touches'
             # y box is wide is split first (a sensor far from the touches pins the turn down).
             turn = c.delta * self.marker_rho.max()
-            shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) if self.round.any() \
-                else np.zeros(len(c.v))
+            shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) \
+                if self.round.any() or self.sensors is not None else np.zeros(len(c.v))
             turning = turn >= shift
             if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS or sum(len(d.v) for d in done) > MAX_LEAVES:
                 return None, CONTINUUM

@@ -522,3 +522,25 @@ def test_plans_with_bounded_sensors_are_searched_completely(name):
             assert result["search"] == "complete", result["search_reason"]
             error_mm, error_rad = pose_errors(np.array(result["solutions"][0]["pose"]), truth)
             assert error_mm <= (0.05 if noise_mm else 1e-4) and error_rad <= (1e-3 if noise_mm else 1e-7)
+
+
+@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
+def test_flat_touches_beside_line_sensors_are_searched_completely(printed):
+    """A design whose touches are flat (balls on planes: their bound takes its least over the y box itself) beside
+    line sensors round four bosses (their bound holds the box's half-diagonal): the search splits the y box too, or
+    the sensors never bound a cell and the turn is split until the cell limit. Until the split rule counted the
+    bounded sensors, this design's search stopped there (exit 6) on an exact part and a printed one; now it is
+    complete, ``unique`` and right at three random poses."""
+    name = "{S-T1}{C-R-C}{C-R-C}{C-R-C}{C-R-C}"
+    features = _features(name)
+    tolerance = _tolerance(name, features) if printed else None
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        truth = np.eye(4)
+        truth[:3, :3], truth[:3, 3] = random_rotation(rng), rng.uniform(-80, 80, 3)
+        touches, contacts = plan_touches(_fixture(name).touch_plans()["default"].touches, truth)
+        result = register_touches(features, touches, contacts=contacts, tolerance=tolerance)
+        assert result["search"] == "complete", result["search_reason"]
+        assert result["status"] == "unique"
+        error_mm, error_rad = pose_errors(np.array(result["solutions"][0]["pose"]), truth)
+        assert error_mm <= 1e-4 and error_rad <= 1e-7
