@@ -361,6 +361,32 @@ def test_a_pose_the_search_did_not_find_makes_it_incomplete(monkeypatch):
     assert "did not find" in result["search_reason"] and exit_code(result) == 6
 
 
+@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")  # the infinite boxes' middle
+def test_features_without_a_patch_are_not_called_searched():
+    """Features with no extent (a features.json entry without one: an unbounded patch) are outside the search's
+    guarantee: its patch boxes are infinite there and it drops every cell (the boxes' middle is not a number),
+    so the check after it finds the starts' pose passing and says the search is incomplete (exit 6). Never
+    `complete` with a pose the search did not find: the pose given is right on the {C-R-C}x6 bosses' point
+    touches with their extents removed, and the search is not called complete."""
+    import copy
+
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.pose import pose_errors
+    from fixturecad.registration.touchfile import exit_code
+    from search_cases import CASES, layout
+
+    case = next(c for c in CASES if c.name.startswith("{C-R-C}x6"))
+    for index in range(3):
+        lay = layout(case, 0.0, index)
+        unbounded = {fid: copy.copy(f) for fid, f in lay.features.items()}
+        for f in unbounded.values():
+            f.extent = Extent()
+        result = register_touches(unbounded, lay.touches, contacts=lay.contacts)
+        assert result["search"] == "incomplete" and exit_code(result) == 6, result["search"]
+        error_mm, error_rad = pose_errors(np.array(result["pose"]), lay.truth)
+        assert error_mm <= 1e-6 and error_rad <= 1e-8
+
+
 def test_a_weak_pose_stops_the_search(monkeypatch):
     """A pose that passes on its patches but that the touches determine too weakly to judge makes the answer
     `underdetermined` whatever else passes: the search stops at it (exit 4, no pose claimed, the reason named),
