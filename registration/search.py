@@ -202,7 +202,8 @@ class Tree:
         self.centroid = self.points.mean(axis=0) if centroid is None else np.asarray(centroid, float)
         # Whether the rows can fix a pose: their largest rank at a few rotations (it drops at special ones),
         # the touches' centroid on the touched patches' centre.
-        middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
+        with np.errstate(invalid="ignore"):  # an unbounded patch's box has no middle: 0 there
+            middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
         middle = np.where(np.isfinite(middle), middle, 0.0)
         # (Its bounds hold either way: :mod:`.unlabelled` uses them where the rows leave motions free.)
         self.fixes_pose = any(matrix_rank(self.full.evaluate(R, self.centroid - R @ middle)[1],
@@ -234,6 +235,7 @@ class Tree:
         self.patch_low, self.patch_high = np.array([box[0] for box in boxes]), np.array([box[1] for box in boxes])
         grow = patch_growth(self.root, self.dev, self.offset)
         self.low, self.high = self.patch_low - grow[:, None], self.patch_high + grow[:, None]
+        self.bounded = np.all(np.isfinite(self.low) & np.isfinite(self.high), axis=1)
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
@@ -372,10 +374,12 @@ class Tree:
         reach = self.root + self.dev[None] + turn
         # The flat rows at R0 and y = 0: the row at y is value + m.y.
         value = np.einsum("ri,kri->kr", self.row_unit, c.a[:, self.row_touch] - self.flat_anchor[self.row_touch])
-        # y keeps every touch within reach of its patch's box: each box about y's own axes.
-        middle = 0.5 * (self.low + self.high)[None] - c.a
-        half = (0.5 * (self.high - self.low) @ np.abs(self.Q))[None] + turn[..., None]
-        middle = middle @ self.Q
+        # y keeps every touch within reach of its patch's box: each box about y's own axes (none for an unbounded
+        # patch, whose box has no middle).
+        low, high = (np.where(self.bounded[:, None], x, 0.0) for x in (self.low, self.high))
+        middle = (0.5 * (low + high)[None] - c.a) @ self.Q
+        half = np.where(self.bounded[None, :, None], (0.5 * (high - low) @ np.abs(self.Q))[None] + turn[..., None],
+                        np.inf)
         lo, hi = middle - half, middle + half
         # ... and every round touch within its reach of its element: its core within that of its radius, on the
         # axes its distance depends on: every axis for a point core, the first two for a line core along the
@@ -612,6 +616,7 @@ class Tree:
         ``y`` box puts it in: exact on a point core and on a line core along the box's last axis, within the
         box's half-diagonal on another line core."""
         centre, half = 0.5 * (ylo + yhi), 0.5 * (yhi - ylo)
+        centre = np.where(np.isfinite(centre), centre, 0.0)  # an unbounded axis: any centre, half-width infinite
         rel = (a[:, self.round] - self.anchor[self.round]) @ self.Q + centre[:, None]  # on the box's axes
         return least_over_box(rel, half[:, None], self.direction[self.round] @ self.Q,
                               self.core[self.round] == "point", self.aligned[self.round], self.offset[self.round])
@@ -671,7 +676,8 @@ class Tree:
             turn = c.delta * self.marker_rho.max()
             shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) \
                 if self.round.any() or self.sensors is not None else np.zeros(len(c.v))
-            turning = turn >= shift
+            # A y box still unbounded (unbounded patches) has no middle to split at: its turn is split.
+            turning = (turn >= shift) | ~np.isfinite(shift)
             if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS or sum(len(d.v) for d in done) > MAX_LEAVES:
                 return None, CONTINUUM
             # A cell whose model pins its turn down is narrowed to it at once, the rest split.

@@ -361,14 +361,14 @@ def test_a_pose_the_search_did_not_find_makes_it_incomplete(monkeypatch):
     assert "did not find" in result["search_reason"] and exit_code(result) == 6
 
 
-@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")  # the infinite boxes' middle
-def test_features_without_a_patch_are_not_called_searched():
-    """Features with no extent (a features.json entry without one: an unbounded patch) are outside the search's
-    guarantee: its patch boxes are infinite there and it drops every cell (the boxes' middle is not a number),
-    so the check after it finds the starts' pose passing and says the search is incomplete (exit 6). Never
-    `complete` with a pose the search did not find: the pose given is right on the {C-R-C}x6 bosses' point
-    touches with their extents removed, and the search is not called complete."""
+def test_features_without_a_patch_are_searched_completely():
+    """Features with no extent (a features.json entry without one: an unbounded patch) put no box on y: the
+    search keeps such y boxes unbounded (no middle to split at: their turn is split) until the touches bound them.
+    Before, the boxes' middle was not a number there and every cell was dropped (the check after the search then
+    said incomplete, exit 6). The {C-R-C}x6 bosses' point touches with their extents removed: complete, unique,
+    right, with no warning of an invalid value."""
     import copy
+    import warnings
 
     from fixturecad.registration.engine import register_touches
     from fixturecad.registration.pose import pose_errors
@@ -381,8 +381,10 @@ def test_features_without_a_patch_are_not_called_searched():
         unbounded = {fid: copy.copy(f) for fid, f in lay.features.items()}
         for f in unbounded.values():
             f.extent = Extent()
-        result = register_touches(unbounded, lay.touches, contacts=lay.contacts)
-        assert result["search"] == "incomplete" and exit_code(result) == 6, result["search"]
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            result = register_touches(unbounded, lay.touches, contacts=lay.contacts)
+        assert result["search"] == "complete" and result["status"] == "unique" and exit_code(result) == 0
         error_mm, error_rad = pose_errors(np.array(result["pose"]), lay.truth)
         assert error_mm <= 1e-6 and error_rad <= 1e-8
 
