@@ -39,6 +39,10 @@ class Problem:
         self._row_feature = None
         self._radius_derivative = None
 
+    def point_touches(self):
+        """The problem of its point and ball touches alone, on the part as drawn."""
+        return Problem([g for g in self.groups if g.points is not None], self.sigma, self.lever)
+
     def sensor_rows(self, rotation, translation, grow=0.0):
         """Rows and Jacobian whitened for the sensor noise only (the fixture's deviations left in)."""
         values, jacobians = [], []

@@ -180,8 +180,8 @@ class Tree:
     (:mod:`.sensor_bounds`), their bound times ``weight``."""
 
     def __init__(self, problem, threshold, centroid=None, stand_ins=(), sensors=(), weight=1.0):
-        groups = [g for g in problem.groups if g.points is not None]
-        self.problem = Problem(groups, problem.sigma, problem.lever)
+        self.problem = problem.point_touches()
+        groups = self.problem.groups
         # Every row the search bounds, sensors' included: what fixes the pose, and what regions' poses are refined on.
         singles = [subset(g, np.array([k])) for g, k in sensors]
         self.full = Problem(groups + singles, problem.sigma, problem.lever)
@@ -235,7 +235,6 @@ class Tree:
         self.patch_low, self.patch_high = np.array([box[0] for box in boxes]), np.array([box[1] for box in boxes])
         grow = patch_growth(self.root, self.dev, self.offset)
         self.low, self.high = self.patch_low - grow[:, None], self.patch_high + grow[:, None]
-        self.bounded = np.all(np.isfinite(self.low) & np.isfinite(self.high), axis=1)
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
@@ -282,6 +281,12 @@ class Tree:
         self.relevant = np.ones(3, bool)
         if self.round.any() and self.aligned[self.round].all() and self.sensors is None:
             self.relevant[2] = False
+        # Each touch's patch box, its middle and its half-widths on the box's axes (an unbounded patch's box has no
+        # middle: 0 there, and infinite half-widths).
+        bounded = np.all(np.isfinite(self.low) & np.isfinite(self.high), axis=1)[:, None]
+        low, high = np.where(bounded, self.low, 0.0), np.where(bounded, self.high, 0.0)
+        self.patch_middle = 0.5 * (low + high)
+        self.patch_half = np.where(bounded, 0.5 * (high - low) @ np.abs(self.Q), np.inf)
 
     def modes(self, groups, tolerance, q, stand_ins, sensors):
         """A printed part's deviation modes, as the first-order model carries them: ``L`` (k, k') with
@@ -375,11 +380,9 @@ class Tree:
         # The flat rows at R0 and y = 0: the row at y is value + m.y.
         value = np.einsum("ri,kri->kr", self.row_unit, c.a[:, self.row_touch] - self.flat_anchor[self.row_touch])
         # y keeps every touch within reach of its patch's box: each box about y's own axes (none for an unbounded
-        # patch, whose box has no middle).
-        low, high = (np.where(self.bounded[:, None], x, 0.0) for x in (self.low, self.high))
-        middle = (0.5 * (low + high)[None] - c.a) @ self.Q
-        half = np.where(self.bounded[None, :, None], (0.5 * (high - low) @ np.abs(self.Q))[None] + turn[..., None],
-                        np.inf)
+        # patch).
+        middle = (self.patch_middle[None] - c.a) @ self.Q
+        half = self.patch_half[None] + turn[..., None]
         lo, hi = middle - half, middle + half
         # ... and every round touch within its reach of its element: its core within that of its radius, on the
         # axes its distance depends on: every axis for a point core, the first two for a line core along the
@@ -608,15 +611,13 @@ class Tree:
 
     def box_centre(self, c):
         """The centres (K, 3) of the cells' y boxes, fixture frame (0 along an unbounded axis)."""
-        centre = 0.5 * (c.ylo + c.yhi)
-        return np.where(np.isfinite(centre), centre, 0.0) @ self.Q.T
+        return box_middle(c.ylo, c.yhi) @ self.Q.T
 
     def round_least(self, a, ylo, yhi):
         """The least distance (K, r) of each round touch from its element over the box of ``x_i`` that the
         ``y`` box puts it in: exact on a point core and on a line core along the box's last axis, within the
         box's half-diagonal on another line core."""
-        centre, half = 0.5 * (ylo + yhi), 0.5 * (yhi - ylo)
-        centre = np.where(np.isfinite(centre), centre, 0.0)  # an unbounded axis: any centre, half-width infinite
+        centre, half = box_middle(ylo, yhi), 0.5 * (yhi - ylo)  # an unbounded axis: any centre, infinite half-width
         rel = (a[:, self.round] - self.anchor[self.round]) @ self.Q + centre[:, None]  # on the box's axes
         return least_over_box(rel, half[:, None], self.direction[self.round] @ self.Q,
                               self.core[self.round] == "point", self.aligned[self.round], self.offset[self.round])
@@ -867,6 +868,12 @@ def patch_growth(root, dev, offset):
     """How far (mm) a touch that passes may lie off its patch's box: the patch's tolerance and widening, the root
     of the threshold, its deviation bound, its distance off the surface (a ball's radius)."""
     return EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + root + dev + offset
+
+
+def box_middle(lo, hi):
+    """The middles of boxes ``lo``-``hi`` (..., 3) mm, 0 along an unbounded axis."""
+    middle = 0.5 * (lo + hi)
+    return np.where(np.isfinite(middle), middle, 0.0)
 
 
 def least_over_box(rel, half, direction, point, aligned, radius):

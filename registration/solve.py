@@ -14,7 +14,6 @@ import numpy as np
 
 from .least_squares import levenberg_marquardt
 from .pose import check_fixture2meas
-from .problem import Problem
 from .search import mahalanobis, search, threshold_mm2
 from .starts import best_starts, initial_poses
 from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, inadmissible, judged, same_pose
@@ -66,8 +65,7 @@ def solve(problem, initial_pose=None, complete=True, found=None):
     reach = []
     # The touches a region's extent follows, point and ball touches: one of them off its patch by more than the
     # region reaches shows that no pose of it is admissible. (Only where there are regions: not on a nominal pose.)
-    followed = Problem([g for g in problem.groups if g.points is not None], problem.sigma, problem.lever) \
-        if extents else None
+    followed = problem.point_touches() if extents else None
     for k, (R, t) in enumerate(starts):
         known = [(s.rotation, s.translation) for s in solutions]
         R2, t2, r, J = levenberg_marquardt(problem, R, t, known=known)
