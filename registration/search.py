@@ -252,6 +252,22 @@ class Tree:
         inertia = np.sum(self.rho[self.flat] ** 2) * np.eye(3) - bf.T @ bf
         self.flat_swing = float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0)))
         self.flat_dev = float(np.linalg.norm(self.dev[self.flat]))
+        # Flat touches on one feature, two or more: their rows' least over y is the same wherever y is, so its
+        # swing is their own turn about their own centroid, not the touches' centroid (:meth:`zeroth_bound`).
+        owner_row = np.concatenate([[k] * g.count for k, g in enumerate(groups)])[self.row_touch] \
+            if len(self.row_touch) else np.zeros(0, int)
+        self.flat_groups = []
+        for k in np.unique(owner_row):
+            rows = np.flatnonzero(owner_row == k)
+            touches = np.unique(self.row_touch[rows])
+            if len(touches) < 2:
+                continue
+            M = self.row_unit[rows]
+            off = np.eye(len(rows)) - M @ np.linalg.pinv(M.T @ M, rcond=1e-9) @ M.T
+            u = b[touches] - b[touches].mean(axis=0)
+            inertia = np.sum(u**2) * np.eye(3) - u.T @ u
+            self.flat_groups.append((rows, off, float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0))),
+                                     float(np.linalg.norm(self.dev[touches]))))
         # Round touches on one core in pairs: the difference of their squared distances from it is linear in y
         # (the circles' radical axis), a slab for y however far the box is from the core (:meth:`contract`).
         # Each touch is paired with the one farthest from it across the core (the narrowest slab), at most n pairs.
@@ -265,7 +281,19 @@ class Tree:
                 j = mates[np.argmax(np.linalg.norm((b[mates] - b[i]) @ projector[i], axis=1))]
                 pairs.add((min(i, j), max(i, j)))
         self.pairs = np.array(sorted(pairs), int).reshape(-1, 2)
-        self.pair_projector = projector[self.pairs[:, 0]]
+        # Each paired touch's projector across its core, once a touch however many pairs it is in.
+        self.paired, pair_index = np.unique(self.pairs, return_inverse=True)
+        self.pair_index = pair_index.reshape(-1, 2)
+        self.paired_projector = projector[self.paired]
+        # A sphere's centre touched four times or more lies where its touches put it in the measurement frame,
+        # whatever the pose: each touch within its contact offset, give or take sqrt(T) and its deviation bound
+        # (no turn), of it. That box bounds y with one turn, the centre's (:meth:`zeroth_bound`).
+        self.centres = []
+        for k in range(len(groups)):
+            idx = np.flatnonzero((owner == k) & self.round & (self.core == "point"))
+            if len(idx) >= 4 and np.allclose(self.anchor[idx], self.anchor[idx[0]]):
+                lo, hi = shell_box(self.points[idx], self.offset[idx], self.root + self.dev[idx])
+                self.centres.append((self.anchor[idx[0]], 0.5 * (lo + hi), 0.5 * (hi - lo)))
         # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
         # axes hold its touches' distances exactly and its last needs no split for them.
         lines = np.flatnonzero(self.round & (self.core == "line"))
@@ -396,6 +424,11 @@ class Tree:
                                          lo[:, self.round])
             hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + core_reach[..., None]),
                                          hi[:, self.round])
+        for anchor, centre, half in self.centres:
+            rel = centre - self.centroid
+            spread = half @ np.abs(c.R @ self.Q) + (c.delta * (np.linalg.norm(rel) + np.linalg.norm(half)))[:, None]
+            middle = (anchor - rel @ c.R) @ self.Q
+            c.ylo, c.yhi = np.maximum(c.ylo, middle - spread), np.minimum(c.yhi, middle + spread)
         c.ylo = np.maximum(c.ylo, np.max(lo, axis=1))
         c.yhi = np.minimum(c.yhi, np.min(hi, axis=1))
         self.contract(c, reach, value)
@@ -408,7 +441,12 @@ class Tree:
             y_hat = y_star @ self.Q
             gap = np.maximum(c.ylo - y_hat, 0.0) + np.maximum(y_hat - c.yhi, 0.0)
             root = np.sqrt(q_min + self.H_flat_least * np.sum(gap**2, axis=1)) - c.delta * self.flat_swing
-            bound = bound + np.maximum(root - self.flat_dev, 0.0) ** 2
+            flat = np.maximum(root - self.flat_dev, 0.0) ** 2
+            if self.flat_groups:
+                grouped = sum(np.maximum(np.linalg.norm(value[:, rows] @ off, axis=1) - c.delta * swing - dev, 0.0)
+                              ** 2 for rows, off, swing, dev in self.flat_groups)
+                flat = np.maximum(flat, grouped)
+            bound = bound + flat
         if self.round.any():
             near = self.round_least(c.a, c.ylo, c.yhi)
             bound = bound + np.sum(np.maximum(near - turn[:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
@@ -451,31 +489,18 @@ class Tree:
         low, high = -value - reach[:, self.row_touch], -value + reach[:, self.row_touch]
         if len(self.pairs):
             i, j = self.pairs.T
-            u = c.a - self.anchor[None]  # (K, n, 3)
-            Pu_i = np.einsum("pij,kpj->kpi", self.pair_projector, u[:, i])
-            Pu_j = np.einsum("pij,kpj->kpi", self.pair_projector, u[:, j])
+            k, m = self.pair_index.T
+            Pu = np.einsum("pij,kpj->kpi", self.paired_projector, c.a[:, self.paired] - self.anchor[self.paired])
+            square = np.sum(Pu**2, axis=2)
             near = np.maximum(self.offset[None] - reach, 0.0) ** 2
             far = (self.offset[None] + reach) ** 2
-            constant = np.sum(Pu_i**2, axis=2) - np.sum(Pu_j**2, axis=2)
-            g = np.concatenate([g, 2.0 * (Pu_i - Pu_j) @ self.Q], axis=1)
+            constant = square[:, k] - square[:, m]
+            g = np.concatenate([g, 2.0 * (Pu[:, k] - Pu[:, m]) @ self.Q], axis=1)
             low = np.concatenate([low, near[:, i] - far[:, j] - constant], axis=1)
             high = np.concatenate([high, far[:, i] - near[:, j] - constant], axis=1)
         if not g.shape[1]:
             return
-        g = np.where(np.abs(g) > 1e-12, g, 0.0)
-        for _ in range(CONTRACT_ROUNDS):
-            lo, hi = np.maximum(c.ylo, -BIG_MM)[:, None], np.minimum(c.yhi, BIG_MM)[:, None]
-            t_lo, t_hi = np.minimum(g * lo, g * hi), np.maximum(g * lo, g * hi)  # (K, S, 3)
-            rest_lo = np.sum(t_lo, axis=2, keepdims=True) - t_lo
-            rest_hi = np.sum(t_hi, axis=2, keepdims=True) - t_hi
-            # g_k y_k in [low - rest_hi, high - rest_lo], divided by g_k (its ends swapped when g_k < 0).
-            with np.errstate(divide="ignore", invalid="ignore"):
-                a = (low[..., None] - rest_hi) / g
-                b = (high[..., None] - rest_lo) / g
-            new_lo = np.where(g > 0, a, np.where(g < 0, b, -np.inf))
-            new_hi = np.where(g > 0, b, np.where(g < 0, a, np.inf))
-            c.ylo = np.maximum(c.ylo, np.max(new_lo, axis=1))
-            c.yhi = np.minimum(c.yhi, np.min(new_hi, axis=1))
+        c.ylo, c.yhi = propagated(g, low, high, c.ylo, c.yhi, CONTRACT_ROUNDS)
 
     def narrowed(self, c):
         """Which cells' rotation boxes narrow to their model's ellipsoid, and the narrower boxes (v, w).
@@ -868,6 +893,46 @@ def patch_growth(root, dev, offset):
     """How far (mm) a touch that passes may lie off its patch's box: the patch's tolerance and widening, the root
     of the threshold, its deviation bound, its distance off the surface (a ball's radius)."""
     return EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + root + dev + offset
+
+
+def shell_box(points, radius, width):
+    """A box (lo, hi) holding every centre within ``radius +- width`` of each of the points (n, 3): the shells'
+    boxes, narrowed by the radical slabs of every pair (|p_i - C|^2 - |p_j - C|^2 is linear in C): the box of
+    the slabs' least-squares solve, then interval propagation (two rounds: more narrow it by little)."""
+    origin = points.mean(axis=0)
+    p = points - origin
+    near, far = np.maximum(radius - width, 0.0) ** 2, (radius + width) ** 2
+    lo, hi = np.max(p - (radius + width)[:, None], axis=0), np.min(p + (radius + width)[:, None], axis=0)
+    i, j = np.triu_indices(len(p), 1)
+    g = 2.0 * (p[i] - p[j])
+    constant = np.sum(p[i] ** 2, axis=1) - np.sum(p[j] ** 2, axis=1)
+    low, high = constant - (far[i] - near[j]), constant - (near[i] - far[j])  # g.C lies between
+    if np.linalg.matrix_rank(g) == 3:
+        # Any A with A g = I gives C = A (g C): the least-squares one's box.
+        A = np.linalg.pinv(g)
+        mid, half = A @ (0.5 * (low + high)), np.abs(A) @ (0.5 * (high - low))
+        lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
+    lo, hi = propagated(g[None], low[None], high[None], lo[None], hi[None], 2)
+    return lo[0] + origin, hi[0] + origin
+
+
+def propagated(g, low, high, lo, hi, rounds):
+    """Boxes (K, 3) narrowed to slabs ``low <= g.y <= high`` (g (K, S, 3), low and high (K, S)): each slab
+    narrows each axis to what the box's other axes leave it, ``rounds`` times over all slabs at once."""
+    zero = np.abs(g) <= 1e-12
+    g = np.where(zero, 0.0, g)
+    for _ in range(rounds):
+        y_lo, y_hi = np.maximum(lo, -BIG_MM)[:, None], np.minimum(hi, BIG_MM)[:, None]
+        p, q = g * y_lo, g * y_hi
+        t_lo, t_hi = np.minimum(p, q), np.maximum(p, q)  # (K, S, 3)
+        # g_k y_k in [low - rest_hi, high - rest_lo], divided by g_k (its ends swapped when g_k < 0); an axis a
+        # slab does not hold is left as it is.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = (low[..., None] - np.sum(t_hi, axis=2, keepdims=True) + t_hi) / g
+            b = (high[..., None] - np.sum(t_lo, axis=2, keepdims=True) + t_lo) / g
+        lo = np.maximum(lo, np.max(np.where(zero, -np.inf, np.minimum(a, b)), axis=1))
+        hi = np.minimum(hi, np.min(np.where(zero, np.inf, np.maximum(a, b)), axis=1))
+    return lo, hi
 
 
 def box_middle(lo, hi):
