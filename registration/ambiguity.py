@@ -128,6 +128,7 @@ def features_beyond_tolerance(problem, solutions, starts=4):
 
 
 SEPARATING_MARGIN_MM = 1.0  # a separating touch keeps this far inside its patch's edge under every candidate
+SEPARATION_LEAST_MM = 1e-6  # a touch that tells the candidates apart by less than this tells them apart by rounding
 
 
 def separating_touch(features, solutions):
@@ -141,7 +142,9 @@ def separating_touch(features, solutions):
     candidate, and the smallest of these distances, over every pair, is
     maximised (``separation_mm``). Only points that lie over the patch, at
     least ``SEPARATING_MARGIN_MM`` inside its edge, under every candidate are
-    offered: whichever pose is true, the probe meets the part there.
+    offered: whichever pose is true, the probe meets the part there. None when
+    no such point separates them (two planes that the candidates turn onto
+    each other at a right angle, and surfaces they turn onto themselves).
     """
     if len(solutions) < 2:
         return None
@@ -173,4 +176,4 @@ def separating_touch(features, solutions):
                 "point_meas_mm": meas[k].tolist(),
                 "separation_mm": float(gap[k]),
             }
-    return best
+    return best if best is not None and best["separation_mm"] > SEPARATION_LEAST_MM else None

@@ -579,7 +579,9 @@ def format_result(result, pose_format="matrix"):
     if result["separating_touch"]:
         s = result["separating_touch"]
         lines.append(f"separating touch: {s['feature']} at {s['point_meas_mm']} (separates by {s['separation_mm']:.3f} mm)")
-    elif result.get("next_touch"):
+    elif result["status"] == "ambiguous":
+        lines.append("separating touch: none on the patches tells these poses apart")
+    if not result["separating_touch"] and result.get("next_touch"):
         n = result["next_touch"]
         point = ", ".join(f"{round(x, 3) + 0.0:.3f}" for x in n["point_meas_mm"])
         approach = ", ".join(f"{round(x, 3) + 0.0:.3f}" for x in n["approach_meas"])

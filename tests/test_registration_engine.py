@@ -15,6 +15,7 @@ from fixturecad.registration.problem import Problem
 from fixturecad.registration.starts import plane_cylinder_starts
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import TouchGroup, build_groups, point_touches
+from fixturecad.registration.touchfile import format_result
 from fixturecad.registration.uncertainty import cramer_rao_bound
 from fixturecad.registration.contacts import ContactType
 from fixturecad.registration.features import Plane, Sphere
@@ -267,6 +268,26 @@ def test_three_sphere_touches_and_too_little_elsewhere_is_ambiguous():
         result = register_touches(features, more)
         assert result["status"] == "unique"
         assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
+
+
+def test_no_separating_touch_is_offered_where_none_separates():
+    """The inclined plane with two touches on the plane's line through the cylinder's axis and four on the
+    cylinder: the true pose and its half turn about the axis both fit, the plane turned onto one at a right
+    angle to it, the cylinder onto itself. Probed at the nearest point, no touch on either tells them apart:
+    none is offered (it was one separating them by 1e-14 mm), and the report says so."""
+    features, _ = _plan("inclined-plane-cylinder", "default")
+    angles = np.radians([10.0, 100.0, 190.0, 280.0])
+    plan = {"plane": np.array([[0.0, 8.0, 0.0], [0.0, -12.0, 0.0]]),
+            "cylinder": np.c_[20.0 * np.cos(angles), 20.0 * np.sin(angles), [-30.0, -40.0, -50.0, -35.0]]}
+    truth = _random_pose(np.random.default_rng(2))
+    touches = {k: v @ truth[:3, :3].T + truth[:3, 3] for k, v in plan.items()}
+    result = register_touches(features, touches)
+    assert result["status"] == "ambiguous" and result["search"] == "complete"
+    errors = sorted(_solution_errors(result, truth))
+    assert len(errors) == 2 and max(errors[0]) < 1e-6
+    assert errors[1][1] == pytest.approx(np.pi, abs=1e-6)
+    assert result["separating_touch"] is None
+    assert "separating touch: none on the patches tells these poses apart" in format_result(result)
 
 
 def test_the_probe_approach_rules_out_the_mirror():
