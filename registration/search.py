@@ -184,15 +184,15 @@ class Tree:
         groups = self.problem.groups
         # Every row the search bounds, sensors' included: what fixes the pose, and what regions' poses are refined on.
         singles = [subset(g, np.array([k])) for g, k in sensors]
-        self.full = Problem(groups + singles, problem.sigma, problem.lever)
+        self.full = Problem(groups + singles, problem.sigma, problem.lever) if singles else self.problem
         self.sensors = None
         # The test, deviations and all, with the bounded sensors unless their cost is weighed apart; with stand-ins
         # off their sensors' features on a printed part only what must pass is known of it (their features have
         # no modes of their own).
         self.sensors_apart = bool(sensors) and weight != 1.0
         printed_stand_ins = problem.tolerance is not None and not all(one.own for one in stand_ins)
-        self.judge = None if printed_stand_ins else Problem(groups + ([] if self.sensors_apart else singles),
-                                                            problem.sigma, problem.lever, problem.tolerance)
+        self.judge = None if printed_stand_ins else self.full if problem.tolerance is None and not self.sensors_apart \
+            else Problem(groups + ([] if self.sensors_apart else singles), problem.sigma, problem.lever, problem.tolerance)
         self.root = float(np.sqrt(threshold))
         if not groups:
             self.fixes_pose = False
@@ -238,11 +238,14 @@ class Tree:
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
-        rows = []
+        rows, spans = [], {}  # (each element's span once: a feature's touches share it)
         for i in np.flatnonzero(self.flat):
-            d = self.direction[i]
-            M = np.outer(d, d) if self.core[i] == "plane" else np.eye(3) - np.outer(d, d)
-            rows += [(i, m) for m in np.linalg.eigh(M)[1].T if m @ M @ m > 0.5]
+            key = (self.core[i] == "plane", *self.direction[i])
+            if key not in spans:
+                d = self.direction[i]
+                M = np.outer(d, d) if key[0] else np.eye(3) - np.outer(d, d)
+                spans[key] = [m for m in np.linalg.eigh(M)[1].T if m @ M @ m > 0.5]
+            rows += [(i, m) for m in spans[key]]
         self.row_touch = np.array([i for i, _ in rows], int)
         self.row_unit = np.array([m for _, m in rows]).reshape(-1, 3)
         self.H_flat = self.row_unit.T @ self.row_unit
