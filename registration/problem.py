@@ -40,7 +40,9 @@ class Problem:
         self._radius_derivative = None
 
     def point_touches(self):
-        """The problem of its point and ball touches alone, on the part as drawn."""
+        """The problem of its point and ball touches alone, on the part as drawn (itself when it is that)."""
+        if self.tolerance is None and all(g.points is not None for g in self.groups):
+            return self
         return Problem([g for g in self.groups if g.points is not None], self.sigma, self.lever)
 
     def sensor_rows(self, rotation, translation, grow=0.0):
