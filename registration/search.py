@@ -238,6 +238,7 @@ class Tree:
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
+        owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])  # each touch's group
         rows, spans = [], {}  # (each element's span once: a feature's touches share it)
         for i in np.flatnonzero(self.flat):
             key = (self.core[i] == "plane", *self.direction[i])
@@ -251,14 +252,11 @@ class Tree:
         self.H_flat = self.row_unit.T @ self.row_unit
         self.H_flat_least = float(max(np.linalg.eigvalsh(self.H_flat)[0], 0.0))
         self.H_flat_pinv = np.linalg.pinv(self.H_flat, rcond=1e-9)
-        bf = b[self.flat]
-        inertia = np.sum(self.rho[self.flat] ** 2) * np.eye(3) - bf.T @ bf
-        self.flat_swing = float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0)))
+        self.flat_swing = largest_swing(b[self.flat])
         self.flat_dev = float(np.linalg.norm(self.dev[self.flat]))
         # Flat touches on one feature, two or more: their rows' least over y is the same wherever y is, so its
         # swing is their own turn about their own centroid, not the touches' centroid (:meth:`zeroth_bound`).
-        owner_row = np.concatenate([[k] * g.count for k, g in enumerate(groups)])[self.row_touch] \
-            if len(self.row_touch) else np.zeros(0, int)
+        owner_row = owner[self.row_touch]
         self.flat_groups = []
         for k in np.unique(owner_row):
             rows = np.flatnonzero(owner_row == k)
@@ -267,14 +265,11 @@ class Tree:
                 continue
             M = self.row_unit[rows]
             off = np.eye(len(rows)) - M @ np.linalg.pinv(M.T @ M, rcond=1e-9) @ M.T
-            u = b[touches] - b[touches].mean(axis=0)
-            inertia = np.sum(u**2) * np.eye(3) - u.T @ u
-            self.flat_groups.append((rows, off, float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0))),
+            self.flat_groups.append((rows, off, largest_swing(b[touches] - b[touches].mean(axis=0)),
                                      float(np.linalg.norm(self.dev[touches]))))
         # Round touches on one core in pairs: the difference of their squared distances from it is linear in y
         # (the circles' radical axis), a slab for y however far the box is from the core (:meth:`contract`).
         # Each touch is paired with the one farthest from it across the core (the narrowest slab), at most n pairs.
-        owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])
         projector = np.eye(3) - np.where((self.core == "line")[:, None, None],
                                          np.einsum("ni,nj->nij", self.direction, self.direction), 0.0)
         pairs = set()
@@ -296,7 +291,9 @@ class Tree:
             idx = np.flatnonzero((owner == k) & self.round & (self.core == "point"))
             if len(idx) >= 4 and np.allclose(self.anchor[idx], self.anchor[idx[0]]):
                 lo, hi = shell_box(self.points[idx], self.offset[idx], self.root + self.dev[idx])
-                self.centres.append((self.anchor[idx[0]], 0.5 * (lo + hi), 0.5 * (hi - lo)))
+                rel, half = 0.5 * (lo + hi) - self.centroid, 0.5 * (hi - lo)
+                # (the box's middle off the centroid, its half-widths, and how far a unit turn moves its points)
+                self.centres.append((self.anchor[idx[0]], rel, half, np.linalg.norm(rel) + np.linalg.norm(half)))
         # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
         # axes hold its touches' distances exactly and its last needs no split for them.
         lines = np.flatnonzero(self.round & (self.core == "line"))
@@ -427,9 +424,9 @@ class Tree:
                                          lo[:, self.round])
             hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + core_reach[..., None]),
                                          hi[:, self.round])
-        for anchor, centre, half in self.centres:
-            rel = centre - self.centroid
-            spread = half @ np.abs(c.R @ self.Q) + (c.delta * (np.linalg.norm(rel) + np.linalg.norm(half)))[:, None]
+        turned = np.abs(c.R @ self.Q) if self.centres else None
+        for anchor, rel, half, lever in self.centres:
+            spread = half @ turned + (c.delta * lever)[:, None]
             middle = (anchor - rel @ c.R) @ self.Q
             c.ylo, c.yhi = np.maximum(c.ylo, middle - spread), np.minimum(c.yhi, middle + spread)
         c.ylo = np.maximum(c.ylo, np.max(lo, axis=1))
@@ -896,6 +893,13 @@ def patch_growth(root, dev, offset):
     """How far (mm) a touch that passes may lie off its patch's box: the patch's tolerance and widening, the root
     of the threshold, its deviation bound, its distance off the surface (a ball's radius)."""
     return EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + root + dev + offset
+
+
+def largest_swing(u):
+    """A turn by ``delta`` moves the offsets ``u`` (n, 3) mm by at most ``delta`` times this (the root of the sum
+    of their moves' squares): the root of their inertia tensor's largest eigenvalue."""
+    inertia = np.sum(u**2) * np.eye(3) - u.T @ u
+    return float(np.sqrt(max(np.linalg.eigvalsh(inertia)[-1], 0.0)))
 
 
 def shell_box(points, radius, width):
