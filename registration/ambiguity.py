@@ -6,12 +6,12 @@ inlined into the generated standalone ``register.py``.
 
 import numpy as np
 
-from .least_squares import levenberg_marquardt
+from .least_squares import levenberg_marquardt, levenberg_marquardt_batch
 from .patches import patch_points
 from .problem import Problem
 from .solve import solve
 from .touches import point_touches
-from .verdict import Solution, judged, same_pose
+from .verdict import Solution, chi_square_passes, judged, same_pose
 
 SCREEN_STARTS = 4  # candidate poses of the whole set an explanation is looked for from, lowest cost first
 
@@ -39,7 +39,7 @@ def explanations(problem, features, solutions, initial_pose=None):
         if not any(same_pose(pose, known) for known in starts):
             starts.append(pose)
     touches = list(dict.fromkeys(int(k) for k in problem.row_touch))
-    left_out = {touch: _fits_from(problem.without(touch), starts) for touch in touches}
+    left_out = _left_out_fits(problem, touches, starts)
     if not any(left_out.values()):
         left_out = {touch: _fits(problem.without(touch), initial_pose) for touch in touches}
     found = []
@@ -60,7 +60,7 @@ def explanations(problem, features, solutions, initial_pose=None):
 def _fits(problem, initial_pose):
     """Every admissible rank-6 pose passing the residual test, solved from scratch."""
     # The closed-form starts only: a complete search for every touch left out costs seconds.
-    return [s for s in solve(problem, initial_pose, complete=False) if s.good]
+    return list(solve(problem, initial_pose, complete=False, good_only=True))
 
 
 def _robust_pose(problem, R, t, iterations=5):
@@ -74,14 +74,28 @@ def _robust_pose(problem, R, t, iterations=5):
 
 def _fits_from(problem, starts):
     """The distinct admissible rank-6 poses passing the residual test refined from ``starts``."""
-    length = problem.scale()
-    found = []
-    for R, t in starts:
-        R, t, r, J = levenberg_marquardt(problem, R, t)
-        solution = judged(problem, Solution(R, t, r, J), length)
-        if solution.good and not any(same_pose((R, t), (s.rotation, s.translation)) for s in found):
-            found.append(solution)
-    return found
+    return _left_out_fits(problem, [None], starts)[None]
+
+
+def _left_out_fits(problem, touches, starts):
+    """:func:`_fits_from` for the problem without each of ``touches`` (None: with every touch), all refined at
+    once: {touch: fits}."""
+    left = np.repeat([-1 if k is None else k for k in touches], len(starts))
+    Rs, ts = (np.tile(np.array(x), (len(touches),) + (1,) * np.ndim(x[0])) for x in zip(*starts))
+    Rs, ts = levenberg_marquardt_batch(problem, Rs, ts, left)
+    fits = {}
+    for touch, poses in zip(touches, np.split(np.arange(len(left)), len(touches))):
+        reduced = problem if touch is None else problem.without(touch)
+        length, found = reduced.scale(), []
+        for k in poses:
+            r, J = reduced.evaluate(Rs[k], ts[k])
+            if not chi_square_passes(r @ r, len(r), 6, reduced.sigma):
+                continue  # (no rank passes it then: judged, it would not be good)
+            solution = judged(reduced, Solution(Rs[k], ts[k], r, J), length)
+            if solution.good and not any(same_pose((Rs[k], ts[k]), (s.rotation, s.translation)) for s in found):
+                found.append(solution)
+        fits[touch] = found
+    return fits
 
 
 def _moved(reduced, group, feature, touch):

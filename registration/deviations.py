@@ -169,29 +169,40 @@ class FixtureTolerance:
 
 
 def deviation_rows(problem, tolerance, rotation, translation, jacobian):
-    """J_d (m, K): how the problem's (whitened) rows change with every mode coordinate at a pose.
+    """J_d (m, K): how the problem's (whitened) rows change with every mode coordinate at a pose
+    (:func:`mode_rows`, the modes' twists mapped into the measurement frame)."""
+    return mode_rows(tolerance, problem.row_feature, jacobian,
+                     lambda fid: tolerance.feature_twists(fid, rotation, translation),
+                     lambda: problem.radius_derivative(rotation, translation))
+
+
+def mode_rows(tolerance, row_feature, jacobian, twists, radius_rows):
+    """J_d (..., m, K): how rows (their twist Jacobian (..., m, 6), each row's feature id (m,)) change with every
+    mode coordinate.
 
     A mode moves one feature rigidly: its rows change as the fixture's rows
-    do under that twist (``jacobian``, the rows' twist Jacobian), the rows of
-    other features not at all. A radius mode grows the feature.
+    do under that twist (``twists(fid)``: the feature's mode twists (k, 6) in
+    the Jacobian's frame), the rows of other features not at all. A radius
+    mode grows the feature: ``radius_rows()`` (..., m), how each row changes as
+    its feature's radius grows, asked for only when one is touched.
     """
-    row_feature = problem.row_feature
-    Jd = np.zeros((len(jacobian), tolerance.size))
+    Jd = np.zeros(jacobian.shape[:-1] + (tolerance.size,))
     drho = None
     for fid, s in tolerance.slices.items():
-        rows = row_feature == fid
-        if not rows.any():
+        rows = np.flatnonzero(row_feature == fid)
+        if not len(rows):
             continue
         m = tolerance.modes[fid]
-        Jd[np.ix_(rows, range(s.start, s.stop))] = jacobian[rows] @ tolerance.feature_twists(fid, rotation, translation).T
+        Jd[..., rows, s] = jacobian[..., rows, :] @ twists(fid).T
         if m.radius.any():
-            drho = problem.radius_derivative(rotation, translation) if drho is None else drho
-            Jd[np.ix_(rows, s.start + np.flatnonzero(m.radius))] = drho[rows][:, None]
+            drho = radius_rows() if drho is None else drho
+            Jd[..., rows[:, None], s.start + np.flatnonzero(m.radius)] = drho[..., rows, None]
     return Jd
 
 
 def whitening(tolerance, Jd, sigma_mm):
-    """``x -> C^-1/2 x`` for the rows' covariance ``C = I + J_d S J_d^T / sigma^2`` (rows of x the rows).
+    """``x -> C^-1/2 x`` for the rows' covariance ``C = I + J_d S J_d^T / sigma^2`` (rows of x the rows; J_d
+    (..., m, K) and x (..., m) or (..., m, c): each leading index its own rows).
 
     C is the identity plus a rank-k term ``U U^T`` (k modes, ``U = J_d root / sigma``): from U's thin SVD
     ``Q s``, ``C^-1/2 = I + Q (1 / sqrt(1 + s^2) - 1) Q^T``, in memory and time linear in the rows (a dense
@@ -199,10 +210,13 @@ def whitening(tolerance, Jd, sigma_mm):
     row stays nearest its own row, whatever the rows' order.
     """
     Q, s, _ = np.linalg.svd(Jd @ tolerance.root / sigma_mm, full_matrices=False)
-    shrink = 1.0 / np.sqrt(1.0 + s**2) - 1.0
+    shrink = (1.0 / np.sqrt(1.0 + s**2) - 1.0)[..., None]
 
     def whiten(x):
-        return x + Q @ (shrink * (Q.T @ x)) if x.ndim == 1 else x + Q @ (shrink[:, None] * (Q.T @ x))
+        column = x.ndim < Q.ndim
+        x = x[..., None] if column else x
+        x = x + Q @ (shrink * (np.swapaxes(Q, -1, -2) @ x))
+        return x[..., 0] if column else x
 
     return whiten
 

@@ -8,11 +8,12 @@ import numpy as np
 
 from .contacts import DIRECTION_KEYS, POINT_KEYS, residuals_and_jacobian
 from .defaults import DEFAULT_SIGMA_MM, SENSOR_LEVER_MM
-from .deviations import deviation_rows, whitening
+from .deviations import deviation_rows, mode_rows, whitening
 from .noise import is_point_sensor, placement_centre, whitened
 from .touches import TouchGroup
 
 RADIUS_DERIVATIVE_REACH = 1e-2  # rad and mm: how far the pose may move before a radius derivative is redone
+RADIUS_STEP_MM = 1e-4  # the radius derivative's central difference
 
 
 class Problem:
@@ -74,7 +75,7 @@ class Problem:
         sigma = float(np.hypot(self.sigma, self.tolerance.point_sigma_mm))
         return Problem(self.groups, sigma, self.lever)
 
-    def radius_derivative(self, rotation, translation, step=1e-4):
+    def radius_derivative(self, rotation, translation):
         """How each (whitened) row changes as its feature's radius grows, shape (m,) per mm.
 
         Kept while the pose stays within ``RADIUS_DERIVATIVE_REACH`` (rad, mm):
@@ -84,9 +85,9 @@ class Problem:
             R0, t0, value = self._radius_derivative
             if np.abs(rotation - R0).max() < RADIUS_DERIVATIVE_REACH and np.abs(translation - t0).max() < RADIUS_DERIVATIVE_REACH:
                 return value
-        grown = self.sensor_rows(rotation, translation, step)[0]
-        shrunk = self.sensor_rows(rotation, translation, -step)[0]
-        value = (grown - shrunk) / (2 * step)
+        grown = self.sensor_rows(rotation, translation, RADIUS_STEP_MM)[0]
+        shrunk = self.sensor_rows(rotation, translation, -RADIUS_STEP_MM)[0]
+        value = (grown - shrunk) / (2 * RADIUS_STEP_MM)
         self._radius_derivative = (rotation, translation, value)
         return value
 
@@ -116,16 +117,41 @@ class Problem:
         self._count_rows()
         return int(sum(g.rows * g.count for g in self.batches))
 
-    def evaluate_batch(self, rotations, translations):
-        """Residuals (K, m) and fixture-frame Jacobians (K, m, 6) at K poses in one call.
+    def evaluate_batch(self, rotations, translations, without=None):
+        """Residuals (K, m) and fixture-frame Jacobians (K, m, 6) at K poses in one call, whitened as
+        :meth:`evaluate` whitens them (its rows in the groups' order). ``without`` (K,): a touch index each
+        pose's problem leaves out (:meth:`without`; -1: none), its rows zero.
 
         Each pose's sensors are mapped into the fixture frame (``R^T (x - t)``),
         all K copies stacked into one call of the contact model at the identity.
         The translation columns give the fixture-frame translation ``v`` that
-        moves the pose to ``t + R v``.
+        moves the pose to ``t + R v``. In that frame a printed part's mode
+        moves the rows by ``J twist`` at every pose (:func:`.deviations.mode_rows`;
+        :meth:`evaluate` maps the twist to the measurement frame instead).
         """
+        r, J, feature, touch = self._batch_rows(rotations, translations)
+        if without is not None:
+            # (a left-out touch's zero rows are zero in J_d too: whitening leaves them zero and the others as
+            # the problem without it whitens them)
+            kept = touch[None] != np.asarray(without)[:, None]
+            r, J = r * kept, J * kept[..., None]
+        if self.tolerance is None:
+            return r, J
+
+        def radius_rows():
+            drho = (self._batch_rows(rotations, translations, RADIUS_STEP_MM)[0]
+                    - self._batch_rows(rotations, translations, -RADIUS_STEP_MM)[0]) / (2 * RADIUS_STEP_MM)
+            return drho if without is None else drho * kept
+
+        Jd = mode_rows(self.tolerance, feature, J, lambda fid: self.tolerance.modes[fid].twists, radius_rows)
+        whiten = whitening(self.tolerance, Jd, self.sigma)
+        return whiten(r), whiten(J)
+
+    def _batch_rows(self, rotations, translations, grow=0.0):
+        """:meth:`evaluate_batch`'s rows whitened for the sensor noise only, and each row's feature id and touch
+        index (m,); ``grow``: every sphere and cylinder grown by this many mm."""
         K = len(rotations)
-        values, jacobians = [], []
+        values, jacobians, feature, touch = [], [], [], []
         for g in self.groups:
             geometry = {}
             for key, value in g.sensor.geometry.items():
@@ -138,13 +164,20 @@ class Problem:
                     moved = np.broadcast_to(value, (K,) + value.shape)
                 geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
             sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
-            v, J = residuals_and_jacobian(g.ctype, sensor, g.fixture, np.eye(3), np.zeros(3), np.tile(g.rho, K))
+            fixture, rho = g.fixture, g.rho
+            if grow and "r" in fixture.geometry:
+                fixture = type(fixture)(fixture.kind, fixture.fixed, {**fixture.geometry, "r": fixture["r"] + grow})
+                rho = rho + grow
+            v, J = residuals_and_jacobian(g.ctype, sensor, fixture, np.eye(3), np.zeros(3), np.tile(rho, K))
             if not is_point_sensor(g.sensor):
                 centres = (g.centre[None] - translations[:, None]) @ rotations
                 v, J = whitened(v, J, centres.reshape(-1, 3), self.lever)
             values.append(v.reshape(K, -1))
             jacobians.append(J.reshape(K, -1, 6))
-        return np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1)
+            feature += [g.feature.id] * values[-1].shape[1]
+            touch.append(np.repeat(g.index, v.shape[1]))
+        return (np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1), np.array(feature, dtype=object),
+                np.concatenate(touch))
 
     def without(self, touch):
         """The plan with one touch (by caller index) left out."""

@@ -12,11 +12,12 @@ the generated standalone ``register.py``.
 
 import numpy as np
 
-from .least_squares import levenberg_marquardt
+from .least_squares import levenberg_marquardt, levenberg_marquardt_batch
 from .pose import check_fixture2meas
 from .search import mahalanobis, search, threshold_mm2
 from .starts import best_starts, initial_poses
-from .verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, inadmissible, judged, same_pose
+from .verdict import (EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, chi_square_passes,
+                      inadmissible, judged, same_pose)
 
 LOCAL_STARTS = 96  # closed-form starts refined when the search does not complete
 
@@ -37,12 +38,13 @@ class Solutions(list):
         return self.search == "complete"
 
 
-def solve(problem, initial_pose=None, complete=True, found=None):
+def solve(problem, initial_pose=None, complete=True, found=None, good_only=False):
     """All distinct solutions, best first (:class:`Solutions`).
 
     ``initial_pose``: refine from it only. ``complete``: without a nominal pose, search every pose that
     passes (:mod:`.search`; ``found``: its :class:`.search.Regions`, searched already); else refine the
-    closed-form starts only (the explanations' quick refits).
+    closed-form starts only (the explanations' quick refits). ``good_only``: only the good solutions (the
+    others are not judged).
     """
     solutions = Solutions()
     starts, extents, weak = [], [], None
@@ -66,11 +68,16 @@ def solve(problem, initial_pose=None, complete=True, found=None):
     # The touches a region's extent follows, point and ball touches: one of them off its patch by more than the
     # region reaches shows that no pose of it is admissible. (Only where there are regions: not on a nominal pose.)
     followed = problem.point_touches() if extents else None
-    for k, (R, t) in enumerate(starts):
-        known = [(s.rotation, s.translation) for s in solutions]
-        R2, t2, r, J = levenberg_marquardt(problem, R, t, known=known)
-        if any(same_pose((R2, t2), pose) for pose in known):
+    # Every start refined, at once where there are several (one alone is refined on its own: cheaper), then
+    # taken in order: a pose refined already is one solution.
+    refined = [levenberg_marquardt(problem, R, t)[:2] for R, t in starts] if len(starts) < 2 else \
+        zip(*levenberg_marquardt_batch(problem, *map(np.array, zip(*starts))))
+    for k, ((R, t), (R2, t2)) in enumerate(zip(starts, refined)):
+        if any(same_pose((R2, t2), (s.rotation, s.translation)) for s in solutions):
             continue
+        r, J = problem.evaluate(R2, t2)
+        if good_only and not chi_square_passes(r @ r, len(r), 6, problem.sigma):
+            continue  # (it fails the test at rank 6: not good at any rank)
         solution = judged(problem, Solution(R2, t2, r, J), length)
         if k < len(extents):
             # The region's extent about where the search left it, and how far refinement moved the touches.
@@ -80,6 +87,8 @@ def solve(problem, initial_pose=None, complete=True, found=None):
             solution.wide = reach[-1] > EXTENT_WIDENING_MAX_MM and not inadmissible(
                 followed, R2, t2, tolerance=EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + reach[-1], approaches=False)
         solutions.append(solution)
+    if good_only:
+        solutions[:] = [s for s in solutions if s.good]
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
     if solutions.complete and not extents and any(s.good for s in solutions):
         # The search left no region, yet a start's pose passes: the search missed it, and may have missed more.
