@@ -397,7 +397,8 @@ class Tree:
         return self.first_bound(self.zeroth_bound(Cells(v, w, ylo, yhi)))
 
     def zeroth_bound(self, c):
-        """The cells' y boxes shrunk to the patches and the slabs, and ``zeroth``, their zeroth-order bound."""
+        """The cells' y boxes shrunk to the patches and the slabs, and ``zeroth``, their zeroth-order bound (on a
+        cell the patches and the flat touches already put over T, that bound: the slabs are not drawn)."""
         v, w = c.v, c.w
         c.delta = np.sqrt(3.0) * w
         c.R = rotation_from_vector(v)
@@ -431,31 +432,43 @@ class Tree:
             c.ylo, c.yhi = np.maximum(c.ylo, middle - spread), np.minimum(c.yhi, middle + spread)
         c.ylo = np.maximum(c.ylo, np.max(lo, axis=1))
         c.yhi = np.minimum(c.yhi, np.min(hi, axis=1))
-        self.contract(c, reach, value)
-        bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, 0.0)
-        # Zeroth order: each touch within its turn of where it is at R0.
+        flat = None
         if self.flat.any():
             # q(y) = sum (value + m.y)^2 >= q_min + h |y - y*|^2 outside the box's reach of y*.
             y_star = -(value @ self.row_unit) @ self.H_flat_pinv.T
             q_min = np.sum((value + y_star @ self.row_unit.T) ** 2, axis=1)
             y_hat = y_star @ self.Q
-            gap = np.maximum(c.ylo - y_hat, 0.0) + np.maximum(y_hat - c.yhi, 0.0)
-            root = np.sqrt(q_min + self.H_flat_least * np.sum(gap**2, axis=1)) - c.delta * self.flat_swing
-            flat = np.maximum(root - self.flat_dev, 0.0) ** 2
-            if self.flat_groups:
-                grouped = sum(np.maximum(np.linalg.norm(value[:, rows] @ off, axis=1) - c.delta * swing - dev, 0.0)
-                              ** 2 for rows, off, swing, dev in self.flat_groups)
-                flat = np.maximum(flat, grouped)
-            bound = bound + flat
+            grouped = sum(np.maximum(np.linalg.norm(value[:, rows] @ off, axis=1) - c.delta * swing - dev, 0.0) ** 2
+                          for rows, off, swing, dev in self.flat_groups) if self.flat_groups else np.zeros(len(v))
+
+            def flat(k, ylo, yhi):
+                """The flat touches' bound of cells k with these y boxes."""
+                gap = np.maximum(ylo - y_hat[k], 0.0) + np.maximum(y_hat[k] - yhi, 0.0)
+                root = np.sqrt(q_min[k] + self.H_flat_least * np.sum(gap**2, axis=1)) - c.delta[k] * self.flat_swing
+                return np.maximum(np.maximum(root - self.flat_dev, 0.0) ** 2, grouped[k])
+        # The bound so far (an empty box: none passes; the flat touches' over the box before the slabs shrink it,
+        # which only raises it): the slabs and the rest only for the cells it keeps, which are all it can keep.
+        empty = np.any(c.ylo > c.yhi, axis=1)
+        c.zeroth = np.where(empty, np.inf, 0.0 if flat is None else flat(slice(None), c.ylo, c.yhi))
+        live = np.flatnonzero(c.zeroth <= self.root**2)
+        kept = c.take(live)
+        self.contract(kept, reach[live], value[live])
+        bound = np.where(np.any(kept.ylo > kept.yhi, axis=1), np.inf, 0.0)
+        # Zeroth order: each touch within its turn of where it is at R0.
+        if flat is not None:
+            bound = bound + flat(live, kept.ylo, kept.yhi)
         if self.round.any():
-            near = self.round_least(c.a, c.ylo, c.yhi)
-            bound = bound + np.sum(np.maximum(near - turn[:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
+            near = self.round_least(kept.a, kept.ylo, kept.yhi)
+            bound = bound + np.sum(np.maximum(near - turn[live][:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
         if self.sensors is not None:
             # The sensors bounded by their own rows: a cost apart from the touches', and their first-order rows.
-            sensed, c.s_value, c.s_jw, c.s_m, c.s_rem, c.s_fine, c.s_twist, c.s_radius = self.sensors.cells(
-                c.R, c.delta, self.box_centre(c), np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1))
+            sensed, *rows = self.sensors.cells(kept.R, kept.delta, self.box_centre(kept),
+                                               np.linalg.norm(0.5 * (kept.yhi - kept.ylo), axis=1))
             bound = bound + sensed
-        c.zeroth = bound
+            for name, x in zip(("s_value", "s_jw", "s_m", "s_rem", "s_fine", "s_twist", "s_radius"), rows):
+                setattr(c, name, np.zeros((len(v),) + x.shape[1:], x.dtype))
+                getattr(c, name)[live] = x
+        c.ylo[live], c.yhi[live], c.zeroth[live] = kept.ylo, kept.yhi, bound
         return c
 
     def first_bound(self, c):
