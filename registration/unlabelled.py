@@ -41,7 +41,7 @@ from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
 from .search import (LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Cells, Tree, beyond_pi, contact_offset, deviation_bound,
-                     first_cells, least_over_box, patch_growth, split, threshold_mm2)
+                     first_cells, largest, least, least_over_box, patch_growth, split, threshold_mm2, turned_points)
 from .solve import Solutions, solve, told_apart
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
@@ -259,6 +259,7 @@ class Labels:
         devs = {f.id: 0.0 if tolerance is None else float(deviation_bound(tolerance, f, q)) for f in feature}
         self.dev = np.array([devs[f.id] for f in feature])
         self.box = np.array([patch_box(f) for f in feature])  # (J, 2, 3)
+        self.round = self.core != "plane"
 
     def search(self, threshold, tree_of, best=None, joint=True):
         """The cells handed to the labelled search, by key, as (v, w, ylo, yhi); the reason when the search
@@ -402,7 +403,7 @@ class Labels:
         ``allowed`` (K, J) leaves (K, n), which features are candidates of which touch (K, J), and its y box
         shrunk to the candidates' boxes."""
         turn = (np.sqrt(3.0) * w)[:, None] * self.rho[None]  # (K, n)
-        a = (self.b @ rotation_from_vector(v))[:, self.touch]  # (K, J, 3): R0^T b_i
+        a = turned_points(self.b, rotation_from_vector(v))[:, self.touch]  # (K, J, 3): R0^T b_i
         reach = turn[:, self.touch, None]
         lo = np.maximum(ylo[:, None], low[None] - a - reach)
         hi = np.minimum(yhi[:, None], high[None] - a + reach)
@@ -410,13 +411,18 @@ class Labels:
         finite = np.all(np.isfinite(lo) & np.isfinite(hi), axis=2)
         centre = a + np.where(finite[..., None], 0.5 * (lo + hi), 0.0)
         half = np.where(finite[..., None], 0.5 * (hi - lo), 0.0)
-        least = np.where(finite, self.least(centre, half), 0.0) - turn[:, self.touch]
-        candidate = open_box & (least <= root + self.dev) & allowed
-        share = np.where(candidate, np.maximum(least - self.dev, 0.0) ** 2, np.inf)
+        near = np.where(finite, self.least(centre, half), 0.0) - turn[:, self.touch]
+        candidate = open_box & (near <= root + self.dev) & allowed
+        share = np.where(candidate, np.maximum(near - self.dev, 0.0) ** 2, np.inf)
         bound = np.minimum.reduceat(share, self.starts, axis=1)  # each touch's least share of the cost
-        # y lies in each touch's union of its candidates' boxes.
-        new_lo = np.minimum.reduceat(np.where(candidate[..., None], lo, np.inf), self.starts, axis=1).max(axis=1)
-        new_hi = np.maximum.reduceat(np.where(candidate[..., None], hi, -np.inf), self.starts, axis=1).min(axis=1)
+        # y lies in each touch's union of its candidates' boxes: the labelled touches' own, the unlabelled ones'
+        # over their F pairs each (the pairs' last n F).
+        lo, hi = np.where(candidate[..., None], lo, np.inf), np.where(candidate[..., None], hi, -np.inf)
+        n, F = self.count, len(self.surfaces)
+        new_lo = largest(np.concatenate([lo[:, :self.labelled], least(np.swapaxes(
+            lo[:, self.labelled:].reshape(len(v), n, F, 3), 1, 2))], axis=1))
+        new_hi = least(np.concatenate([hi[:, :self.labelled], largest(np.swapaxes(
+            hi[:, self.labelled:].reshape(len(v), n, F, 3), 1, 2))], axis=1))
         return bound, candidate, np.maximum(ylo, new_lo), np.minimum(yhi, new_hi)
 
     def least(self, centre, half):
@@ -425,6 +431,8 @@ class Labels:
         d = self.direction
         # A plane: the signed distance's range over the box.
         signed = np.einsum("kji,ji->kj", rel, d) - self.offset
-        plane = np.maximum(np.abs(signed) - np.einsum("kji,ji->kj", half, np.abs(d)), 0.0)
-        round_least = least_over_box(rel, half, d, self.core == "point", np.zeros(len(d), bool), self.offset)
-        return np.where(self.core == "plane", plane, round_least)
+        out = np.maximum(np.abs(signed) - np.einsum("kji,ji->kj", half, np.abs(d)), 0.0)
+        r = self.round  # (the planes' is the signed distance's range)
+        out[:, r] = least_over_box(rel[:, r], half[:, r], d[r], self.core[r] == "point", np.zeros(r.sum(), bool),
+                                   self.offset[r])
+        return out
