@@ -52,6 +52,7 @@ This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
 """
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -195,19 +196,10 @@ class Tree:
             else Problem(groups + ([] if self.sensors_apart else singles), problem.sigma, problem.lever, problem.tolerance)
         self.root = float(np.sqrt(threshold))
         if not groups:
-            self.fixes_pose = False
             return
         self.points = np.concatenate([g.points for g in groups])
         # y is the image of this point: the touches' centroid, or one that several trees share (:mod:`.unlabelled`).
         self.centroid = self.points.mean(axis=0) if centroid is None else np.asarray(centroid, float)
-        # Whether the rows can fix a pose: their largest rank at a few rotations (it drops at special ones),
-        # the touches' centroid on the touched patches' centre.
-        with np.errstate(invalid="ignore"):  # an unbounded patch's box has no middle: 0 there
-            middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
-        middle = np.where(np.isfinite(middle), middle, 0.0)
-        # (Its bounds hold either way: :mod:`.unlabelled` uses them where the rows leave motions free.)
-        self.fixes_pose = any(matrix_rank(self.full.evaluate(R, self.centroid - R @ middle)[1],
-                                          self.full.scale()) == 6 for R in rotation_from_vector(RANK_ROTATIONS))
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
         self.modes(groups, problem.tolerance, threshold / problem.sigma**2, stand_ins, [g for g, _ in sensors])
@@ -315,6 +307,20 @@ class Tree:
         low, high = np.where(bounded, self.low, 0.0), np.where(bounded, self.high, 0.0)
         self.patch_middle = 0.5 * (low + high)
         self.patch_half = np.where(bounded, 0.5 * (high - low) @ np.abs(self.Q), np.inf)
+
+    @functools.cached_property
+    def fixes_pose(self):
+        """Whether the rows can fix a pose: their largest rank at a few rotations (it drops at special ones), the
+        touches' centroid on the touched patches' centre. (The bounds hold either way: :mod:`.unlabelled` uses
+        them where the rows leave motions free, and asks this of fewer trees than it bounds with.)"""
+        groups = self.problem.groups
+        if not groups:
+            return False
+        with np.errstate(invalid="ignore"):  # an unbounded patch's box has no middle: 0 there
+            middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
+        middle = np.where(np.isfinite(middle), middle, 0.0)
+        return any(matrix_rank(self.full.evaluate(R, self.centroid - R @ middle)[1], self.full.scale()) == 6
+                   for R in rotation_from_vector(RANK_ROTATIONS))
 
     def modes(self, groups, tolerance, q, stand_ins, sensors):
         """A printed part's deviation modes, as the first-order model carries them: ``L`` (k, k') with
