@@ -50,11 +50,7 @@ class Problem:
         """Rows and Jacobian whitened for the sensor noise only (the fixture's deviations left in)."""
         values, jacobians = [], []
         for g in self.batches:
-            fixture, rho = g.fixture, g.rho
-            if grow and "r" in fixture.geometry:
-                # A grown sphere or cylinder: its radius, and the offset of the touches that include it.
-                fixture = type(fixture)(fixture.kind, fixture.fixed, {**fixture.geometry, "r": fixture["r"] + grow})
-                rho = rho + grow
+            fixture, rho = _grown(g, grow)
             v, J = residuals_and_jacobian(g.ctype, g.sensor, fixture, rotation, translation, rho)
             g.rows = v.shape[1]
             if not is_point_sensor(g.sensor):
@@ -164,10 +160,7 @@ class Problem:
                     moved = np.broadcast_to(value, (K,) + value.shape)
                 geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
             sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
-            fixture, rho = g.fixture, g.rho
-            if grow and "r" in fixture.geometry:
-                fixture = type(fixture)(fixture.kind, fixture.fixed, {**fixture.geometry, "r": fixture["r"] + grow})
-                rho = rho + grow
+            fixture, rho = _grown(g, grow)
             v, J = residuals_and_jacobian(g.ctype, sensor, fixture, np.eye(3), np.zeros(3), np.tile(rho, K))
             if not is_point_sensor(g.sensor):
                 centres = (g.centre[None] - translations[:, None]) @ rotations
@@ -199,6 +192,16 @@ class Problem:
                 pts = np.concatenate(pts)
                 self._scale = max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
         return self._scale
+
+
+def _grown(group, grow):
+    """The group's fixture geometry and touch offsets (rho) with its sphere or cylinder grown by ``grow`` mm: its
+    radius, and the offset of the touches that include it."""
+    fixture, rho = group.fixture, group.rho
+    if grow and "r" in fixture.geometry:
+        fixture = type(fixture)(fixture.kind, fixture.fixed, {**fixture.geometry, "r": fixture["r"] + grow})
+        rho = rho + grow
+    return fixture, rho
 
 
 def _with_centre(group):
