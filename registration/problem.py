@@ -39,6 +39,7 @@ class Problem:
         self.tolerance = tolerance if tolerance is not None and tolerance.size else None
         self._row_feature = None
         self._radius_derivative = None
+        self._batch_layout = None
 
     def point_touches(self):
         """The problem of its point and ball touches alone, on the part as drawn (itself when it is that)."""
@@ -81,9 +82,7 @@ class Problem:
             R0, t0, value = self._radius_derivative
             if np.abs(rotation - R0).max() < RADIUS_DERIVATIVE_REACH and np.abs(translation - t0).max() < RADIUS_DERIVATIVE_REACH:
                 return value
-        grown = self.sensor_rows(rotation, translation, RADIUS_STEP_MM)[0]
-        shrunk = self.sensor_rows(rotation, translation, -RADIUS_STEP_MM)[0]
-        value = (grown - shrunk) / (2 * RADIUS_STEP_MM)
+        value = _radius_difference(lambda grow: self.sensor_rows(rotation, translation, grow)[0])
         self._radius_derivative = (rotation, translation, value)
         return value
 
@@ -135,8 +134,7 @@ class Problem:
             return r, J
 
         def radius_rows():
-            drho = (self._batch_rows(rotations, translations, RADIUS_STEP_MM)[0]
-                    - self._batch_rows(rotations, translations, -RADIUS_STEP_MM)[0]) / (2 * RADIUS_STEP_MM)
+            drho = _radius_difference(lambda grow: self._batch_rows(rotations, translations, grow)[0])
             return drho if without is None else drho * kept
 
         Jd = mode_rows(self.tolerance, feature, J, lambda fid: self.tolerance.modes[fid].twists, radius_rows)
@@ -147,7 +145,7 @@ class Problem:
         """:meth:`evaluate_batch`'s rows whitened for the sensor noise only, and each row's feature id and touch
         index (m,); ``grow``: every sphere and cylinder grown by this many mm."""
         K = len(rotations)
-        values, jacobians, feature, touch = [], [], [], []
+        values, jacobians, rows = [], [], []
         for g in self.groups:
             geometry = {}
             for key, value in g.sensor.geometry.items():
@@ -167,10 +165,12 @@ class Problem:
                 v, J = whitened(v, J, centres.reshape(-1, 3), self.lever)
             values.append(v.reshape(K, -1))
             jacobians.append(J.reshape(K, -1, 6))
-            feature += [g.feature.id] * values[-1].shape[1]
-            touch.append(np.repeat(g.index, v.shape[1]))
-        return (np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1), np.array(feature, dtype=object),
-                np.concatenate(touch))
+            rows.append(v.shape[1])  # (a touch's)
+        if self._batch_layout is None:  # each row's feature id and touch index: the same at every pose
+            self._batch_layout = (
+                np.array([g.feature.id for g, k in zip(self.groups, rows) for _ in range(g.count * k)], dtype=object),
+                np.concatenate([np.repeat(g.index, k) for g, k in zip(self.groups, rows)]))
+        return (np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1), *self._batch_layout)
 
     def without(self, touch):
         """The plan with one touch (by caller index) left out."""
@@ -192,6 +192,11 @@ class Problem:
                 pts = np.concatenate(pts)
                 self._scale = max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
         return self._scale
+
+
+def _radius_difference(rows_at):
+    """How rows change as their features' radii grow, per mm: the central difference of ``rows_at(grow)``."""
+    return (rows_at(RADIUS_STEP_MM) - rows_at(-RADIUS_STEP_MM)) / (2 * RADIUS_STEP_MM)
 
 
 def _grown(group, grow):

@@ -436,8 +436,8 @@ class Tree:
             spread = half @ turned + (c.delta * lever)[:, None]
             middle = (anchor - rel @ c.R) @ self.Q
             c.ylo, c.yhi = np.maximum(c.ylo, middle - spread), np.minimum(c.yhi, middle + spread)
-        c.ylo = np.maximum(c.ylo, largest(lo))
-        c.yhi = np.minimum(c.yhi, least(hi))
+        c.ylo = np.maximum(c.ylo, across(np.maximum, lo))
+        c.yhi = np.minimum(c.yhi, across(np.minimum, hi))
         flat = None
         if self.flat.any():
             # q(y) = sum (value + m.y)^2 >= q_min + h |y - y*|^2 outside the box's reach of y*.
@@ -514,7 +514,7 @@ class Tree:
             near = np.maximum(self.offset[None] - reach, 0.0) ** 2
             far = (self.offset[None] + reach) ** 2
             constant = square[:, k] - square[:, m]
-            g = np.concatenate([g, 2.0 * (Pu[:, k] - Pu[:, m]) @ self.Q], axis=1)
+            g = np.concatenate([g, on_axes(2.0 * (Pu[:, k] - Pu[:, m]), self.Q)], axis=1)
             low = np.concatenate([low, near[:, i] - far[:, j] - constant], axis=1)
             high = np.concatenate([high, far[:, i] - near[:, j] - constant], axis=1)
         if not g.shape[1]:
@@ -956,8 +956,8 @@ def propagated(g, low, high, lo, hi, rounds):
         with np.errstate(divide="ignore", invalid="ignore"):
             a = (low[..., None] - np.sum(t_hi, axis=2, keepdims=True) + t_hi) / g
             b = (high[..., None] - np.sum(t_lo, axis=2, keepdims=True) + t_lo) / g
-        lo = np.maximum(lo, largest(np.where(zero, -np.inf, np.minimum(a, b))))
-        hi = np.minimum(hi, least(np.where(zero, np.inf, np.maximum(a, b))))
+        lo = np.maximum(lo, across(np.maximum, np.where(zero, -np.inf, np.minimum(a, b))))
+        hi = np.minimum(hi, across(np.minimum, np.where(zero, np.inf, np.maximum(a, b))))
     return lo, hi
 
 
@@ -972,19 +972,12 @@ def on_axes(x, Q):
     return (x.reshape(-1, 3) @ Q).reshape(x.shape)
 
 
-def largest(x):
-    """The largest over axis 1 of x (K, n, ...), a touch at a time (numpy reduces across a middle axis slowly)."""
+def across(op, x):
+    """``op`` (np.maximum or np.minimum) reduced over axis 1 of x (K, n, ...), a touch at a time (numpy reduces
+    across a middle axis slowly)."""
     out = x[:, 0].copy()
     for k in range(1, x.shape[1]):
-        np.maximum(out, x[:, k], out=out)
-    return out
-
-
-def least(x):
-    """The least over axis 1 of x (K, n, ...), a touch at a time."""
-    out = x[:, 0].copy()
-    for k in range(1, x.shape[1]):
-        np.minimum(out, x[:, k], out=out)
+        op(out, x[:, k], out=out)
     return out
 
 

@@ -68,14 +68,15 @@ def solve(problem, initial_pose=None, complete=True, found=None, good_only=False
     # The touches a region's extent follows, point and ball touches: one of them off its patch by more than the
     # region reaches shows that no pose of it is admissible. (Only where there are regions: not on a nominal pose.)
     followed = problem.point_touches() if extents else None
-    # Every start refined, at once where there are several (one alone is refined on its own: cheaper), then
-    # taken in order: a pose refined already is one solution.
-    refined = [levenberg_marquardt(problem, R, t)[:2] for R, t in starts] if len(starts) < 2 else \
-        zip(*levenberg_marquardt_batch(problem, *map(np.array, zip(*starts))))
-    for k, ((R, t), (R2, t2)) in enumerate(zip(starts, refined)):
+    # Every start refined, at once where there are several (one alone is refined on its own: cheaper, and it gives
+    # its rows), then taken in order: a pose refined already is one solution.
+    refined = [levenberg_marquardt(problem, R, t) for R, t in starts] if len(starts) < 2 else \
+        [(R, t, None, None) for R, t in zip(*levenberg_marquardt_batch(problem, *map(np.array, zip(*starts))))]
+    for k, ((R, t), (R2, t2, r, J)) in enumerate(zip(starts, refined)):
         if any(same_pose((R2, t2), (s.rotation, s.translation)) for s in solutions):
             continue
-        r, J = problem.evaluate(R2, t2)
+        if r is None:
+            r, J = problem.evaluate(R2, t2)
         if good_only and not chi_square_passes(r @ r, len(r), 6, problem.sigma):
             continue  # (it fails the test at rank 6: not good at any rank)
         solution = judged(problem, Solution(R2, t2, r, J), length)

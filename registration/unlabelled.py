@@ -40,8 +40,8 @@ from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
-from .search import (LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Cells, Tree, beyond_pi, contact_offset, deviation_bound,
-                     first_cells, largest, least, least_over_box, patch_growth, split, threshold_mm2, turned_points)
+from .search import (LEAF_FRACTION, MAX_CELLS, MAX_LEVELS, Cells, Tree, across, beyond_pi, contact_offset,
+                     deviation_bound, first_cells, least_over_box, patch_growth, split, threshold_mm2, turned_points)
 from .solve import Solutions, solve, told_apart
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
@@ -419,9 +419,9 @@ class Labels:
         # over their F pairs each (the pairs' last n F).
         lo, hi = np.where(candidate[..., None], lo, np.inf), np.where(candidate[..., None], hi, -np.inf)
         n, F = self.count, len(self.surfaces)
-        new_lo = largest(np.concatenate([lo[:, :self.labelled], least(np.swapaxes(
+        new_lo = across(np.maximum, np.concatenate([lo[:, :self.labelled], across(np.minimum, np.swapaxes(
             lo[:, self.labelled:].reshape(len(v), n, F, 3), 1, 2))], axis=1))
-        new_hi = least(np.concatenate([hi[:, :self.labelled], largest(np.swapaxes(
+        new_hi = across(np.minimum, np.concatenate([hi[:, :self.labelled], across(np.maximum, np.swapaxes(
             hi[:, self.labelled:].reshape(len(v), n, F, 3), 1, 2))], axis=1))
         return bound, candidate, np.maximum(ylo, new_lo), np.minimum(yhi, new_hi)
 
