@@ -4,6 +4,8 @@ This module imports numpy only and nothing of fixturecad: it is
 inlined into the generated standalone ``register.py``.
 """
 
+import functools
+
 import numpy as np
 
 from .contacts import DIRECTION_KEYS, POINT_KEYS, residuals_and_jacobian
@@ -33,13 +35,17 @@ class Problem:
         self.sigma = float(sigma_mm)
         self.lever = float(lever_mm)
         self._scale = None
-        # Rows are computed per contact type: groups of one type on different
-        # features are stacked into one call of the contact model.
-        self.batches = _merge(self.groups)
         self.tolerance = tolerance if tolerance is not None and tolerance.size else None
         self._row_feature = None
         self._radius_derivative = None
         self._batch_layout = None
+
+    @functools.cached_property
+    def batches(self):
+        """Rows are computed per contact type: groups of one type on different features are stacked into one call
+        of the contact model. (Only when rows are asked for: the unlabelled search builds many problems only to
+        bound them.)"""
+        return _merge(self.groups)
 
     def point_touches(self):
         """The problem of its point and ball touches alone, on the part as drawn (itself when it is that)."""

@@ -89,6 +89,7 @@ WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+MEMO_KEPT = 4096  # values a memoised function (:func:`by_value`) keeps before it forgets them all
 
 
 @dataclass
@@ -231,19 +232,12 @@ class Tree:
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
         owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])  # each touch's group
-        rows, spans = [], {}  # (each element's span once: a feature's touches share it)
-        for i in np.flatnonzero(self.flat):
-            key = (self.core[i] == "plane", *self.direction[i])
-            if key not in spans:
-                d = self.direction[i]
-                M = np.outer(d, d) if key[0] else np.eye(3) - np.outer(d, d)
-                spans[key] = [m for m in np.linalg.eigh(M)[1].T if m @ M @ m > 0.5]
-            rows += [(i, m) for m in spans[key]]
-        self.row_touch = np.array([i for i, _ in rows], int)
-        self.row_unit = np.array([m for _, m in rows]).reshape(-1, 3)
+        flat = np.flatnonzero(self.flat)
+        spans = [row_span(self.core[i] == "plane", self.direction[i]) for i in flat]
+        self.row_touch = np.repeat(flat, [len(m) for m in spans]).astype(int)
+        self.row_unit = np.concatenate(spans) if spans else np.zeros((0, 3))
         self.H_flat = self.row_unit.T @ self.row_unit
-        self.H_flat_least = float(max(np.linalg.eigvalsh(self.H_flat)[0], 0.0))
-        self.H_flat_pinv = np.linalg.pinv(self.H_flat, rcond=1e-9)
+        self.H_flat_least, self.H_flat_pinv = least_and_pinv(self.H_flat)
         self.flat_swing = largest_swing(b[self.flat])
         self.flat_dev = float(np.linalg.norm(self.dev[self.flat]))
         # Flat touches on one feature, two or more: their rows' least over y is the same wherever y is, so its
@@ -255,9 +249,8 @@ class Tree:
             touches = np.unique(self.row_touch[rows])
             if len(touches) < 2:
                 continue
-            M = self.row_unit[rows]
-            off = np.eye(len(rows)) - M @ np.linalg.pinv(M.T @ M, rcond=1e-9) @ M.T
-            self.flat_groups.append((rows, off, largest_swing(b[touches] - b[touches].mean(axis=0)),
+            self.flat_groups.append((rows, across_rows(self.row_unit[rows]),
+                                     largest_swing(b[touches] - b[touches].mean(axis=0)),
                                      float(np.linalg.norm(self.dev[touches]))))
         # Round touches on one core in pairs: the difference of their squared distances from it is linear in y
         # (the circles' radical axis), a slab for y however far the box is from the core (:meth:`contract`).
@@ -272,7 +265,7 @@ class Tree:
                 pairs.add((min(i, j), max(i, j)))
         self.pairs = np.array(sorted(pairs), int).reshape(-1, 2)
         # Each paired touch's projector across its core, once a touch however many pairs it is in.
-        self.paired, pair_index = np.unique(self.pairs, return_inverse=True)
+        self.paired, pair_index = np.unique(self.pairs, return_inverse=True) if pairs else (np.zeros(0, int),) * 2
         self.pair_index = pair_index.reshape(-1, 2)
         self.paired_projector = projector[self.paired]
         # A sphere's centre touched four times or more lies where its touches put it in the measurement frame,
@@ -293,8 +286,10 @@ class Tree:
         if len(lines):
             e1, e2 = perpendicular_basis(self.direction[lines[0]])
             self.Q = np.column_stack([e1, e2, self.direction[lines[0]]])
-        self.aligned = self.round & (self.core == "line") & np.all(
-            np.isclose(self.direction, self.Q[:, 2]) | np.isclose(self.direction, -self.Q[:, 2]), axis=1)
+        self.aligned = self.round & (self.core == "line")
+        if len(lines):
+            self.aligned &= np.all(np.isclose(self.direction, self.Q[:, 2]) | np.isclose(self.direction, -self.Q[:, 2]),
+                                   axis=1)
         # The y box's axes a round touch's distance depends on: all three, or across an aligned axis; a bounded
         # sensor's bound depends on all three (it holds the box's half-diagonal), and on them even beside flat
         # touches only, whose bound takes the least over the box itself.
@@ -914,6 +909,50 @@ def patch_growth(root, dev, offset):
     return EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + root + dev + offset
 
 
+def by_value(function):
+    """``function`` of a few small arrays, memoised on their values: the labelled search under each assignment
+    (:mod:`.unlabelled`) builds the same spans, inverses and swings hundreds of times a call. What it returns is
+    shared: read only."""
+    kept = {}
+
+    @functools.wraps(function)
+    def memoised(*arrays):
+        key = tuple((np.shape(a), np.asarray(a).tobytes()) for a in arrays)
+        if key not in kept:
+            if len(kept) >= MEMO_KEPT:
+                kept.clear()
+            kept[key] = function(*arrays)
+        return kept[key]
+
+    return memoised
+
+
+def _read_only(array):
+    array.setflags(write=False)
+    return array
+
+
+@by_value
+def row_span(plane, direction):
+    """Unit vectors (k, 3) spanning a flat touch's rows: a plane's normal, the two directions across a line,
+    three across a point (its ``direction`` 0)."""
+    M = np.outer(direction, direction) if plane else np.eye(3) - np.outer(direction, direction)
+    return _read_only(np.array([m for m in np.linalg.eigh(M)[1].T if m @ M @ m > 0.5]).reshape(-1, 3))
+
+
+@by_value
+def least_and_pinv(H):
+    """The least eigenvalue (0 at least) and the pseudo-inverse of a symmetric matrix."""
+    return float(max(np.linalg.eigvalsh(H)[0], 0.0)), _read_only(np.linalg.pinv(H, rcond=1e-9))
+
+
+@by_value
+def across_rows(M):
+    """The projector off the column space of rows ``M`` (r, 3): ``I - M (M^T M)^+ M^T``."""
+    return _read_only(np.eye(len(M)) - M @ np.linalg.pinv(M.T @ M, rcond=1e-9) @ M.T)
+
+
+@by_value
 def largest_swing(u):
     """A turn by ``delta`` moves the offsets ``u`` (n, 3) mm by at most ``delta`` times this (the root of the sum
     of their moves' squares): the root of their inertia tensor's largest eigenvalue."""

@@ -57,12 +57,20 @@ FALLBACK_ASSIGNMENTS = 3  # ... and the best this many of them are refined
 LOCAL_ROUNDS = 2  # a search that stops: each touch put on its nearest feature this many times from each start
 
 
-def assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma, lever, tolerance):
+def assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma, lever, tolerance, made=None):
     """The labelled problem: the touch groups, and the unlabelled ``points`` on the features ``assignment``
-    (a feature id per point; None: the point left out) gives them."""
+    (a feature id per point; None: the point left out) gives them. ``made``: a dict that keeps the touch groups
+    made, by feature and touches (a search makes the same ones under hundreds of assignments)."""
     assignment = np.asarray(assignment, dtype=object)
-    extra = [point_touches(features[fid], points[assignment == fid], index[assignment == fid], ball_radius_mm)
-             for fid in dict.fromkeys(assignment) if fid is not None]
+    made = {} if made is None else made
+    extra = []
+    for fid in dict.fromkeys(assignment):
+        if fid is None:
+            continue
+        on = assignment == fid
+        if (fid, on.tobytes()) not in made:
+            made[fid, on.tobytes()] = point_touches(features[fid], points[on], index[on], ball_radius_mm)
+        extra.append(made[fid, on.tobytes()])
     return Problem(list(groups) + extra, sigma, lever, tolerance)
 
 
@@ -130,10 +138,11 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
     the first search and the labelled one under every assignment are)."""
     points, index = np.asarray(points, dtype=np.float64).reshape(-1, 3), np.asarray(index)
     surfaces = _surfaces(features)
+    made = {}
 
     def problem_of(assignment):
         return assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
-                                tolerance)
+                                tolerance, made)
 
     # Every surface gives a point touch one row: the test's threshold is the same under every assignment.
     threshold = threshold_mm2(problem_of([surfaces[0].id] * len(points)))
