@@ -87,6 +87,7 @@ NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
 WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses) tries its best pose on ``stop`` ...
 WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions' poses that pass
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
+SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter than this gives that core no slab
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
 MEMO_KEPT = 4096  # values a memoised function (:func:`by_value`) keeps before it forgets them all
@@ -290,6 +291,15 @@ class Tree:
         if len(lines):
             self.aligned &= np.all(np.isclose(self.direction, self.Q[:, 2]) | np.isclose(self.direction, -self.Q[:, 2]),
                                    axis=1)
+        # A round touch on a line core across the box's axes lies within its reach of a cylinder about the core, and so
+        # between two planes along the core across each of the box's axes (:meth:`contract`): each such plane's unit
+        # normal, the box's axis with its part along the core taken out.
+        slanted = np.flatnonzero(self.round & (self.core == "line") & ~self.aligned)
+        across_axes = self.Q[None] - np.einsum("ni,nj,jk->nik", self.direction[slanted], self.direction[slanted], self.Q)
+        length = np.linalg.norm(across_axes, axis=1)  # (n, 3): each axis' part across the core
+        touch, axis = np.nonzero(length > SLAB_ACROSS)
+        self.slab_touch = slanted[touch]
+        self.slab_normal = (across_axes[touch, :, axis] / length[touch, axis][:, None]).reshape(-1, 3)
         # The y box's axes a round touch's distance depends on: all three, or across an aligned axis; a bounded
         # sensor's bound depends on all three (it holds the box's half-diagonal), and on them even beside flat
         # touches only, whose bound takes the least over the box itself.
@@ -512,6 +522,13 @@ class Tree:
             g = np.concatenate([g, on_axes(2.0 * (Pu[:, k] - Pu[:, m]), self.Q)], axis=1)
             low = np.concatenate([low, near[:, i] - far[:, j] - constant], axis=1)
             high = np.concatenate([high, far[:, i] - near[:, j] - constant], axis=1)
+        if len(self.slab_touch):
+            i = self.slab_touch
+            along = np.einsum("si,ksi->ks", self.slab_normal, c.a[:, i] - self.anchor[i])
+            radius = self.offset[i][None] + reach[:, i]
+            g = np.concatenate([g, np.broadcast_to(self.slab_normal @ self.Q, (len(c.v),) + self.slab_normal.shape)], axis=1)
+            low = np.concatenate([low, -radius - along], axis=1)
+            high = np.concatenate([high, radius - along], axis=1)
         if not g.shape[1]:
             return
         c.ylo, c.yhi = propagated(g, low, high, c.ylo, c.yhi, CONTRACT_ROUNDS)
