@@ -934,7 +934,7 @@ def by_value(function):
 
     @functools.wraps(function)
     def memoised(*arrays):
-        key = tuple((np.shape(a), np.asarray(a).tobytes()) for a in arrays)
+        key = tuple((a.shape, a.dtype.str, a.tobytes()) for a in map(np.asarray, arrays))
         if key not in kept:
             if len(kept) >= MEMO_KEPT:
                 kept.clear()

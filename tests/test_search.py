@@ -13,7 +13,8 @@ from fixturecad.registration.features import Cylinder, Extent, features_from_jso
 from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import Cells, Tree, _joined, search, stand_in_tree, threshold_mm2
+from fixturecad.registration.search import (Cells, Tree, _joined, across_rows, largest_swing, row_span, search,
+                                            stand_in_tree, threshold_mm2)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -338,6 +339,26 @@ def test_leaves_are_joined_as_a_graph_library_joins_them():
         n, expected = connected_components(csr_matrix(near), directed=False)
         assert len(np.unique(labels)) == n
         assert all(len(set(expected[labels == label])) == 1 for label in np.unique(labels))
+
+
+def test_memoised_pieces_answer_by_value():
+    """A tree's pieces memoised on their values (:func:`by_value`): the same values give the same answer, recomputed
+    once; other values their own; what is kept cannot be written to."""
+    rng = np.random.default_rng(6)
+    u = rng.normal(size=(5, 3))
+    assert largest_swing(u.copy()) == largest_swing(u)
+    inertia = np.sum(u**2) * np.eye(3) - u.T @ u
+    assert largest_swing(u) == pytest.approx(np.sqrt(np.linalg.eigvalsh(inertia)[-1]))
+    assert largest_swing(2.0 * u) == pytest.approx(2.0 * largest_swing(u))
+    d = np.array([0.0, 0.6, 0.8])
+    assert row_span(True, d) is row_span(True, d.copy())
+    assert len(row_span(True, d)) == 1 and len(row_span(False, d)) == 2
+    assert np.allclose(np.abs(row_span(True, d)[0]), d)
+    M = np.eye(3)[:2]
+    off = across_rows(M)
+    assert np.allclose(off, 0.0)
+    with pytest.raises(ValueError):
+        off[0, 0] = 1.0
 
 
 def test_a_search_that_cannot_fix_a_pose_is_not_complete():
