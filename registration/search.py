@@ -53,11 +53,13 @@ the generated standalone ``register.py``.
 """
 
 import functools
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .elements import cross, distance_and_outward, perpendicular_basis
+from .fits import kabsch
 from .deviations import largest_row_variance
 from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
@@ -168,6 +170,53 @@ def first_cells():
     v = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
     v = v[np.linalg.norm(v, axis=1) - np.sqrt(3.0) * w <= np.pi]
     return v, np.full(len(v), w), np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
+
+
+def centres_turn(centres):
+    """Rotation boxes (v (k, 3), half-widths w (k,), rad) that hold the rotation vector of every turn putting each
+    touched sphere's centre in its box (:class:`Tree`'s ``centres``), or None where fewer than three centres, or
+    centres in a line, leave the turn open (or open wider than a first-level cell).
+
+    A turn R that puts each centre in its box has ``|R u_j - v_j| <= e_j``: ``u_j`` a centre less a base
+    centre on the fixture, ``v_j`` the same of the boxes' middles, ``e_j`` the norm of the two boxes'
+    half-widths summed. So ``D = R R*^T`` (R* from Kabsch on the middles) moves ``w_j = R* u_j`` by at most
+    ``eps_j = e_j + |R* u_j - v_j|``. A turn by theta about n moves w by ``2 sin(theta/2) |w_perp|``, and any
+    two vectors have ``|a x b| <= 2|a||b_perp| + |b||a_perp|`` (and the same with a and b swapped), so
+    ``sin(theta/2) <= min(2|a| eps_b + |b| eps_a, |a| eps_b + 2|b| eps_a) / (2 |a x b|)``. R's rotation
+    vector then lies within ``(g/2)/sin(g/2) theta`` of R*'s, ``g = |v*| + theta`` (:meth:`Tree.narrowed`),
+    measured along a path from R* whose vector may leave the ball of radius pi: where the box reaches past pi, a
+    second box about v*'s other side ``v' = v* - 2 pi v*/|v*|`` holds the other side ``p - 2 pi p/|p|`` of such a
+    vector p, within ``w + 2 pi |p/|p| - v*/|v*||`` and ``|p/|p| - v*/|v*|| <= 2 w / |v*|``."""
+    if len(centres) < 3:
+        return None
+    fixed = np.array([c[0] for c in centres])
+    middle = np.array([c[1] for c in centres])
+    half = np.array([c[2] for c in centres])
+    R = kabsch(fixed, middle)[0]
+    if R is None:
+        return None
+    sine = np.inf
+    for base in range(len(centres)):
+        others = [k for k in range(len(centres)) if k != base]
+        w = (fixed[others] - fixed[base]) @ R.T
+        eps = np.linalg.norm(half[others] + half[base], axis=1) + np.linalg.norm(w - (middle[others] - middle[base]),
+                                                                                   axis=1)
+        length = np.linalg.norm(w, axis=1)
+        for j, k in itertools.combinations(range(len(others)), 2):
+            area = np.linalg.norm(cross(w[j], w[k]))
+            if area > 0.0:
+                sine = min(sine, min(2 * length[j] * eps[k] + length[k] * eps[j],
+                                     length[j] * eps[k] + 2 * length[k] * eps[j]) / (2.0 * area))
+    if not sine < np.sin(np.pi / FIRST_CELLS / 2.0):
+        return None
+    theta = 2.0 * np.arcsin(sine)
+    v = vector_from_rotation(R)
+    length = np.linalg.norm(v)
+    g = length + theta
+    w = theta * (g / 2.0) / np.sin(g / 2.0) if g > 0.0 else theta
+    if np.linalg.norm(np.abs(v) + w) < np.pi:
+        return v[None], np.array([w])
+    return np.array([v, v - 2.0 * np.pi * v / length]), np.array([w, w * (1.0 + 4.0 * np.pi / length)])
 
 
 def beyond_pi(v, w):
@@ -312,6 +361,15 @@ class Tree:
         low, high = np.where(bounded, self.low, 0.0), np.where(bounded, self.high, 0.0)
         self.patch_middle = 0.5 * (low + high)
         self.patch_half = np.where(bounded, 0.5 * (high - low) @ np.abs(self.Q), np.inf)
+
+    def first_cells(self):
+        """The first level's cells: the rotation box (two past a half turn) that three touched spheres' centres leave
+        (:func:`centres_turn`), else every rotation (:func:`first_cells`); y unbounded."""
+        turn = centres_turn(self.centres)
+        if turn is None:
+            return first_cells()
+        v, w = turn
+        return v, w, np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
 
     @functools.cached_property
     def fixes_pose(self):
@@ -765,7 +823,7 @@ class Tree:
 
     def _regions(self, start, partial, level_tries, region_tries, kept):
         """:meth:`regions`' search, its stop tried on valleys' cells and on wide regions' poses."""
-        start = first_cells() if start is None else (start[0], start[1], *self.turned(start[2], start[3], self.Q))
+        start = self.first_cells() if start is None else (start[0], start[1], *self.turned(start[2], start[3], self.Q))
         budget = PARTIAL_CELLS if partial else None
         leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget, level_tries)
         if leaves is None:

@@ -180,6 +180,11 @@ CASES = [
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
     Case("one touch mislabelled, cube 3-3-3", "cube", (SIGMA_MM,), _mislabelled_touch),
+    # Three balls touched four times each: their centres fix the turn, and the search starts from the one rotation
+    # box they leave (search.centres_turn).
+    Case("sphere-plate 4 per ball", "sphere-plate", (0.0, SIGMA_MM), _counts({"ball_1": 4, "ball_2": 4, "ball_3": 4})),
+    Case("sphere-plate 4 per ball, printed", "sphere-plate", (0.0, SIGMA_MM),
+         _counts({"ball_1": 4, "ball_2": 4, "ball_3": 4}), printed=True),
 ]
 VARIANTS = [(case, noise) for case in CASES for noise in case.noise_mm]
 

@@ -13,8 +13,8 @@ from fixturecad.registration.features import Cylinder, Extent, features_from_jso
 from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import (Cells, Tree, _joined, across_rows, largest_swing, row_span, search,
-                                            stand_in_tree, threshold_mm2)
+from fixturecad.registration.search import (Cells, Tree, _joined, across_rows, centres_turn, largest_swing, row_span,
+                                            search, stand_in_tree, threshold_mm2)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -177,6 +177,81 @@ def test_a_narrowed_cell_holds_every_pose_that_passes(name, counts, ball):
             assert np.any(np.all(np.abs(v_narrow[0] - both) <= w_narrow[0] + 1e-9, axis=1))
             narrowed += 1
     assert narrowed >= 50
+
+
+@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
+@pytest.mark.parametrize("ball", [0.0, 3.0], ids=["point", "ball 3 mm"])
+def test_three_sphere_centres_start_the_search_in_a_box_that_holds_every_pose_that_passes(ball, printed):
+    """The sphere-plate's three balls: on 20 layouts, 30 poses each on the edge of passing (the truth moved along
+    a random twist until the test's cost reaches T), the rotation box the centres leave (:func:`centres_turn`;
+    two past a half turn) holds each pose's rotation vector."""
+    rng = np.random.default_rng(12)
+    widths = []
+    for _ in range(20):
+        problem, R, t = _problem("sphere-plate", None, ball, rng, printed)
+        tree = Tree(problem, threshold_mm2(problem))
+        assert len(tree.centres) == 3
+        turn = centres_turn(tree.centres)
+        if turn is None:
+            continue  # (the centres' boxes leave the turn open wider than a first-level cell)
+        v0, w = turn
+        widths.append(w[0])
+        scale = np.concatenate([np.full(3, 1.0 / tree.rho.max()), np.ones(3)])
+
+        def cost(twist):
+            Rk = R @ rotation_from_vector(twist[:3])
+            r = tree.judge.evaluate(Rk, t + twist[3:])[0]
+            return r @ r
+
+        for _ in range(30):
+            direction = rng.normal(size=6) * scale
+            low, high = 0.0, 1.0
+            while cost(high * direction) < tree.root**2:
+                high *= 2.0
+            for _ in range(30):
+                low, high = (0.5 * (low + high), high) if cost(0.5 * (low + high) * direction) < tree.root**2 \
+                    else (low, 0.5 * (low + high))
+            v = vector_from_rotation(R @ rotation_from_vector(low * direction[:3]))
+            assert np.any(np.all(np.abs(v - v0) <= w[:, None], axis=1))
+    assert len(widths) >= 15 and np.median(widths) < np.radians(10.0 if printed else 2.0)
+
+
+def test_the_centres_turn_holds_every_turn_that_puts_each_centre_in_its_box():
+    """200 layouts of three centres, each box 0.01-0.5 mm wide about a centre's true image: of 20,000 turns drawn
+    about the box's middle, those for which some translation puts each centre in its box (the boxes less the turned
+    centres meet) have their rotation vectors in the box :func:`centres_turn` gives. It fails when the box is a
+    quarter as wide (the bound is loose: the farthest such turn found reaches about a quarter of it)."""
+    rng = np.random.default_rng(13)
+    reached = []
+    for _ in range(200):
+        fixed = rng.uniform(-60, 60, (3, 3))
+        R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
+        half = rng.uniform(0.01, 0.5, (3, 3))
+        middle = fixed @ R.T + t + rng.uniform(-1, 1, (3, 3)) * half
+        turn = centres_turn([(fixed[k], middle[k] - middle.mean(axis=0), half[k]) for k in range(3)])
+        if turn is None:
+            continue
+        v0, w = turn
+        step = rng.normal(size=(20000, 3))
+        step *= 3 * w[0] * rng.uniform(0, 1, (20000, 1)) ** (1 / 3) / np.linalg.norm(step, axis=1, keepdims=True)
+        turns = np.einsum("kij,jl->kil", rotation_from_vector(step), rotation_from_vector(v0[0]))
+        image = np.einsum("kij,nj->kni", turns, fixed)
+        feasible = np.all(np.max(middle - half - image, axis=1) <= np.min(middle + half - image, axis=1), axis=1)
+        v = vector_from_rotation(turns[feasible])
+        within = np.min(np.max(np.abs(v[:, None] - v0[None]), axis=2) / w[None], axis=1)
+        assert np.all(within <= 1.0 + 1e-9)
+        reached.append(within.max(initial=0.0))
+    assert len(reached) >= 150 and max(reached) > 0.1
+
+
+def test_centres_in_a_line_leave_the_turn_open():
+    """Two centres, or three in a line, leave a turn about their line free: the search starts from every rotation."""
+    box = (np.zeros(3), np.full(3, 0.01))
+    line = [(np.array([x, 0.0, 0.0]), np.array([x, 5.0, 0.0]) + box[0], box[1]) for x in (0.0, 40.0, 90.0)]
+    assert centres_turn(line[:2]) is None and centres_turn(line) is None
+    bent = line[:2] + [(np.array([0.0, 60.0, 0.0]), np.array([0.0, 65.0, 0.0]), box[1])]
+    v, w = centres_turn(bent)
+    assert np.allclose(v, 0.0, atol=1e-12) and len(w) == 1 and 1e-3 < w[0] < 3e-3  # 0.02 mm boxes 40-60 mm apart
 
 
 def _cells_hold_the_truth(name, counts, ball, printed, w_range, half_range_mm):
