@@ -157,14 +157,7 @@ def test_a_narrowed_cell_holds_every_pose_that_passes(name, counts, ball):
 
     narrowed = 0
     for _ in range(300):
-        direction = rng.normal(size=6) * scale
-        low, high = 0.0, 1.0
-        while cost(high * direction) < tree.root**2:
-            high *= 2.0
-        for _ in range(40):
-            low, high = (0.5 * (low + high), high) if cost(0.5 * (low + high) * direction) < tree.root**2 \
-                else (low, 0.5 * (low + high))
-        Rk, y = moved(low * direction)
+        Rk, y = moved(_edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2))
         v, y = vector_from_rotation(Rk), y @ tree.Q
         w = np.exp(rng.uniform(np.log(0.003), np.log(0.3)))
         half = np.exp(rng.uniform(np.log(0.01), np.log(3.0), 3))
@@ -177,6 +170,17 @@ def test_a_narrowed_cell_holds_every_pose_that_passes(name, counts, ball):
             assert np.any(np.all(np.abs(v_narrow[0] - both) <= w_narrow[0] + 1e-9, axis=1))
             narrowed += 1
     assert narrowed >= 50
+
+
+def _edge_of_passing(cost, direction, threshold):
+    """The twist along ``direction`` (from the truth, cost 0) at which ``cost`` reaches ``threshold`` (bisection)."""
+    low, high = 0.0, 1.0
+    while cost(high * direction) < threshold:
+        high *= 2.0
+    for _ in range(40):
+        low, high = (0.5 * (low + high), high) if cost(0.5 * (low + high) * direction) < threshold \
+            else (low, 0.5 * (low + high))
+    return low * direction
 
 
 @pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
@@ -204,14 +208,8 @@ def test_three_sphere_centres_start_the_search_in_a_box_that_holds_every_pose_th
             return r @ r
 
         for _ in range(30):
-            direction = rng.normal(size=6) * scale
-            low, high = 0.0, 1.0
-            while cost(high * direction) < tree.root**2:
-                high *= 2.0
-            for _ in range(30):
-                low, high = (0.5 * (low + high), high) if cost(0.5 * (low + high) * direction) < tree.root**2 \
-                    else (low, 0.5 * (low + high))
-            v = vector_from_rotation(R @ rotation_from_vector(low * direction[:3]))
+            twist = _edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2)
+            v = vector_from_rotation(R @ rotation_from_vector(twist[:3]))
             assert np.any(np.all(np.abs(v - v0) <= w[:, None], axis=1))
     assert len(widths) >= 15 and np.median(widths) < np.radians(10.0 if printed else 2.0)
 
