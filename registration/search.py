@@ -180,9 +180,10 @@ def centres_turn(centres):
     A turn R that puts each centre in its box has ``|R u_j - v_j| <= e_j``: ``u_j`` a centre less a base
     centre on the fixture, ``v_j`` the same of the boxes' middles, ``e_j`` the norm of the two boxes'
     half-widths summed. So ``D = R R*^T`` (R* from Kabsch on the middles) moves ``w_j = R* u_j`` by at most
-    ``eps_j = e_j + |R* u_j - v_j|``. A turn by theta about n moves w by ``2 sin(theta/2) |w_perp|``, and any
-    two vectors have ``|a x b| <= 2|a||b_perp| + |b||a_perp|`` (and the same with a and b swapped), so
-    ``sin(theta/2) <= min(2|a| eps_b + |b| eps_a, |a| eps_b + 2|b| eps_a) / (2 |a x b|)``. R's rotation
+    ``eps_j = e_j + |R* u_j - v_j|``. A turn by theta about n moves w by exactly ``2 sin(theta/2) |n x w|``,
+    so ``4 sin^2(theta/2) |n x w_j|^2 / eps_j^2 <= 1`` for each of k differences, and summed, ``4 sin^2(theta/2)
+    n^T M n <= k`` with ``M = sum (|w_j|^2 I - w_j w_j^T) / eps_j^2``: ``sin(theta/2) <= sqrt(k / 4
+    lambda_min(M))`` (the least over the sets of differences: every pair, or each centre's to the others). R's rotation
     vector then lies within ``(g/2)/sin(g/2) theta`` of R*'s, ``g = |v*| + theta`` (:meth:`Tree.narrowed`),
     measured along a path from R* whose vector may leave the ball of radius pi: where the box reaches past pi, a
     second box about v*'s other side ``v' = v* - 2 pi v*/|v*|`` holds the other side ``p - 2 pi p/|p|`` of such a
@@ -195,18 +196,20 @@ def centres_turn(centres):
     R = kabsch(fixed, middle)[0]
     if R is None:
         return None
+    # Every pair's difference, and each base centre's differences to the others: the least bound of the sets.
+    pairs = list(itertools.combinations(range(len(centres)), 2))
+    sets = [pairs] + [[(b, k) for k in range(len(centres)) if k != b] for b in range(len(centres))]
     sine = np.inf
-    for base in range(len(centres)):
-        others = [k for k in range(len(centres)) if k != base]
-        w = (fixed[others] - fixed[base]) @ R.T
-        eps = np.linalg.norm(half[others] + half[base], axis=1) + np.linalg.norm(w - (middle[others] - middle[base]),
-                                                                                   axis=1)
-        length = np.linalg.norm(w, axis=1)
-        for j, k in itertools.combinations(range(len(others)), 2):
-            area = np.linalg.norm(cross(w[j], w[k]))
-            if area > 0.0:
-                sine = min(sine, min(2 * length[j] * eps[k] + length[k] * eps[j],
-                                     length[j] * eps[k] + 2 * length[k] * eps[j]) / (2.0 * area))
+    for chosen in sets:
+        j, k = np.array(chosen).T
+        w = (fixed[k] - fixed[j]) @ R.T
+        eps = np.linalg.norm(half[k] + half[j], axis=1) + np.linalg.norm(w - (middle[k] - middle[j]), axis=1)
+        # sum over the set of |n x w|^2 / eps^2 = n^T M n, at least M's least eigenvalue
+        M = np.einsum("p,pij->ij", 1.0 / eps**2, np.sum(w**2, axis=1)[:, None, None] * np.eye(3)
+                      - np.einsum("pi,pj->pij", w, w))
+        least = np.linalg.eigvalsh(M)[0]
+        if least > 0.0:
+            sine = min(sine, np.sqrt(len(chosen) / (4.0 * least)))
     if not sine < np.sin(np.pi / FIRST_CELLS / 2.0):
         return None
     theta = 2.0 * np.arcsin(sine)

@@ -218,7 +218,7 @@ def test_the_centres_turn_holds_every_turn_that_puts_each_centre_in_its_box():
     """200 layouts of three centres, each box 0.01-0.5 mm wide about a centre's true image: of 20,000 turns drawn
     about the box's middle, those for which some translation puts each centre in its box (the boxes less the turned
     centres meet) have their rotation vectors in the box :func:`centres_turn` gives. It fails when the box is a
-    quarter as wide (the bound is loose: the farthest such turn found reaches about a quarter of it)."""
+    quarter as wide (the bound is loose: the farthest such turn found reaches up to half of it)."""
     rng = np.random.default_rng(13)
     reached = []
     for _ in range(200):
