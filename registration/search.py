@@ -59,7 +59,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .elements import cross, distance_and_outward, perpendicular_basis
-from .fits import kabsch
 from .deviations import largest_row_variance
 from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
@@ -88,6 +87,7 @@ NARROW_ANGLE = 4.0  # rad: a cell whose rotation vectors are shorter than this i
 NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
 WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses) tries its best pose on ``stop`` ...
 WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions' poses that pass
+FIRST_TURN_PLANES = 4  # planes' normals a search starts from at most (two signs each: 2^4 choices)
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter than this gives that core no slab
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
@@ -172,47 +172,51 @@ def first_cells():
     return v, np.full(len(v), w), np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
 
 
-def centres_turn(centres):
-    """Rotation boxes (v (k, 3), half-widths w (k,), rad) that hold the rotation vector of every turn putting each
-    touched sphere's centre in its box (:class:`Tree`'s ``centres``), or None where fewer than three centres, or
-    centres in a line, leave the turn open (or open wider than a first-level cell).
+def measured_normal(points, reach):
+    """A plane's normal in the measurement frame from three touches or more (n, 3) on it, each within ``reach``
+    (n,) mm of the plane, whatever the pose: ``(n*, phi)``, every unit n with ``|n.(p_i - p_j)| <= r_i + r_j``
+    for every pair lying within phi of +n* or -n*; None where the touches leave it open.
 
-    A turn R that puts each centre in its box has ``|R u_j - v_j| <= e_j``: ``u_j`` a centre less a base
-    centre on the fixture, ``v_j`` the same of the boxes' middles, ``e_j`` the norm of the two boxes'
-    half-widths summed. So ``D = R R*^T`` (R* from Kabsch on the middles) moves ``w_j = R* u_j`` by at most
-    ``eps_j = e_j + |R* u_j - v_j|``. A turn by theta about n moves w by exactly ``2 sin(theta/2) |n x w|``,
-    so ``4 sin^2(theta/2) |n x w_j|^2 / eps_j^2 <= 1`` for each of k differences, and summed, ``4 sin^2(theta/2)
-    n^T M n <= k`` with ``M = sum (|w_j|^2 I - w_j w_j^T) / eps_j^2``: ``sin(theta/2) <= sqrt(k / 4
-    lambda_min(M))`` (the least over the sets of differences: every pair, or each centre's to the others). R's rotation
-    vector then lies within ``(g/2)/sin(g/2) theta`` of R*'s, ``g = |v*| + theta`` (:meth:`Tree.narrowed`),
-    measured along a path from R* whose vector may leave the ball of radius pi: where the box reaches past pi, a
-    second box about v*'s other side ``v' = v* - 2 pi v*/|v*|`` holds the other side ``p - 2 pi p/|p|`` of such a
-    vector p, within ``w + 2 pi |p/|p| - v*/|v*||`` and ``|p/|p| - v*/|v*|| <= 2 w / |v*|``."""
-    if len(centres) < 3:
+    Summed over the k pairs, ``n^T P n <= k`` with ``P = sum d d^T / (r_i + r_j)^2`` (d = p_j - p_i); with n* the
+    eigenvector of P's least eigenvalue, ``n = cos(phi) n* + sin(phi) m`` has ``n^T P n >= sin^2(phi)
+    lambda_2``, so ``sin^2(phi) <= k / lambda_2``."""
+    i, j = np.triu_indices(len(points), 1)
+    d = (points[j] - points[i]) / (reach[i] + reach[j])[:, None]
+    lam, vec = np.linalg.eigh(d.T @ d)
+    if not lam[1] > len(i):
         return None
-    fixed = np.array([c[0] for c in centres])
-    middle = np.array([c[1] for c in centres])
-    half = np.array([c[2] for c in centres])
-    R = kabsch(fixed, middle)[0]
-    if R is None:
-        return None
-    # Every pair's difference, and each base centre's differences to the others: the least bound of the sets.
-    pairs = list(itertools.combinations(range(len(centres)), 2))
-    sets = [pairs] + [[(b, k) for k in range(len(centres)) if k != b] for b in range(len(centres))]
+    return vec[:, 0], float(np.arcsin(np.sqrt(len(i) / lam[1])))
+
+
+def turn_bound(fixed, measured, reach, sets):
+    """The turn R* (Wahba's, weighted) and theta such that every turn R with ``|R f_k - g_k| <= e_k`` for all k
+    (fixed (k, 3), measured (k, 3), reach e (k,)) lies within theta of R* (inf where they leave it open).
+
+    ``D = R R*^T`` moves ``w_k = R* f_k`` by at most ``eps_k = e_k + |R* f_k - g_k|``; a turn by theta about n
+    moves w by exactly ``2 sin(theta/2) |n x w|``, so ``4 sin^2(theta/2) |n x w_k|^2 / eps_k^2 <= 1`` each, and
+    summed over a set of k of them ``4 sin^2(theta/2) n^T M n <= k``, ``M = sum (|w|^2 I - w w^T) / eps^2``:
+    ``sin(theta/2) <= sqrt(k / (4 lambda_min(M)))``, the least over the ``sets`` (lists of indices)."""
+    U, _, Vt = np.linalg.svd(np.einsum("k,ki,kj->ij", 1.0 / reach**2, measured, fixed))
+    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    w = fixed @ R.T
+    eps = reach + np.linalg.norm(w - measured, axis=1)
     sine = np.inf
     for chosen in sets:
-        j, k = np.array(chosen).T
-        w = (fixed[k] - fixed[j]) @ R.T
-        eps = np.linalg.norm(half[k] + half[j], axis=1) + np.linalg.norm(w - (middle[k] - middle[j]), axis=1)
-        # sum over the set of |n x w|^2 / eps^2 = n^T M n, at least M's least eigenvalue
-        M = np.einsum("p,pij->ij", 1.0 / eps**2, np.sum(w**2, axis=1)[:, None, None] * np.eye(3)
-                      - np.einsum("pi,pj->pij", w, w))
+        ws, es = w[chosen], eps[chosen]
+        M = np.einsum("p,pij->ij", 1.0 / es**2, np.sum(ws**2, axis=1)[:, None, None] * np.eye(3)
+                      - np.einsum("pi,pj->pij", ws, ws))
         least = np.linalg.eigvalsh(M)[0]
         if least > 0.0:
             sine = min(sine, np.sqrt(len(chosen) / (4.0 * least)))
-    if not sine < np.sin(np.pi / FIRST_CELLS / 2.0):
-        return None
-    theta = 2.0 * np.arcsin(sine)
+    return R, 2.0 * np.arcsin(sine) if sine < 1.0 else np.inf
+
+
+def rotation_boxes(R, theta):
+    """Rotation boxes (v (k, 3), half-widths (k,)) holding a rotation vector of every turn within theta of R: R's
+    vector v* within ``(g/2)/sin(g/2) theta``, ``g = |v*| + theta`` (:meth:`Tree.narrowed`), measured along a
+    path from R whose vector may leave the ball of radius pi; where the box reaches past pi, a second box about
+    v*'s other side ``v* - 2 pi v*/|v*|`` holds the other side ``p - 2 pi p/|p|`` of such a vector p, within
+    ``w + 2 pi |p/|p| - v*/|v*||``, and ``|p/|p| - v*/|v*|| <= 2 w / |v*|``."""
     v = vector_from_rotation(R)
     length = np.linalg.norm(v)
     g = length + theta
@@ -220,6 +224,51 @@ def centres_turn(centres):
     if np.linalg.norm(np.abs(v) + w) < np.pi:
         return v[None], np.array([w])
     return np.array([v, v - 2.0 * np.pi * v / length]), np.array([w, w * (1.0 + 4.0 * np.pi / length)])
+
+
+def first_turns(centres, normals, most=FIRST_TURN_PLANES):
+    """Rotation boxes (v (k, 3), half-widths (k,), rad) that hold a rotation vector of every turn that passes, as
+    touched spheres' centres and planes' normals fix it whatever the pose, or None where they leave it open wider
+    than a first-level cell.
+
+    ``centres``: :class:`Tree`'s (fixture centre, box middle off the centroid, half-widths): a turn that puts
+    each centre in its box moves each difference of two centres ``u`` to within ``|h_i + h_j|`` of its boxes'
+    middles' difference. ``normals``: (fixture normal, measured normal n*, phi) (:func:`measured_normal`): the
+    turn moves the fixture normal to within ``2 sin(phi/2)`` of +n* or -n*; each choice of signs gives its own
+    turns, and a choice is dropped where no turn can make it: two normals' angle is kept by a turn (within
+    ``phi_k + phi_l``), and three normals' triple product (within the sum of their chords). The bound
+    (:func:`turn_bound`) over every difference and normal, the centres' differences alone (every pair, each
+    base's), and the normals alone; the boxes (:func:`rotation_boxes`) of every choice that a turn can make."""
+    normals = sorted(normals, key=lambda n: n[2])[:most]
+    pairs = list(itertools.combinations(range(len(centres)), 2))
+    fixed = [centres[j][0] - centres[i][0] for i, j in pairs] + [f for f, _, _ in normals]
+    reach = [np.linalg.norm(centres[i][2] + centres[j][2]) for i, j in pairs] + \
+        [2.0 * np.sin(phi / 2.0) for _, _, phi in normals]
+    if not fixed:
+        return None
+    fixed, reach = np.array(fixed, float).reshape(-1, 3), np.array(reach, float)
+    planes = np.arange(len(pairs), len(fixed))
+    sets = [np.arange(len(fixed)), planes, np.arange(len(pairs))] + [
+        [k for k, (i, j) in enumerate(pairs) if base in (i, j)] for base in range(len(centres))]
+    sets = [chosen for chosen in sets if len(chosen) >= 2]
+    boxes = []
+    for signs in itertools.product((1.0, -1.0), repeat=len(normals)):
+        measured = [centres[j][1] - centres[i][1] for i, j in pairs] + [s * n for s, (_, n, _) in zip(signs, normals)]
+        measured = np.array(measured, float).reshape(-1, 3)
+        f, g, e = fixed[planes], measured[planes], reach[planes]
+        angle_kept = all(abs(np.arccos(np.clip(f[k] @ f[m], -1, 1)) - np.arccos(np.clip(g[k] @ g[m], -1, 1)))
+                         <= normals[k][2] + normals[m][2] for k, m in itertools.combinations(range(len(f)), 2))
+        triple_kept = all(abs(np.linalg.det(f[list(c)]) - np.linalg.det(g[list(c)])) <= e[list(c)].sum()
+                          for c in itertools.combinations(range(len(f)), 3))
+        if not (angle_kept and triple_kept):
+            continue  # no turn makes these signs
+        R, theta = turn_bound(fixed, measured, reach, sets)
+        if not theta < np.pi / FIRST_CELLS:
+            return None
+        boxes.append(rotation_boxes(R, theta))
+    if not boxes:
+        return None
+    return np.concatenate([v for v, _ in boxes]), np.concatenate([w for _, w in boxes])
 
 
 def beyond_pi(v, w):
@@ -332,6 +381,15 @@ class Tree:
                 rel, half = 0.5 * (lo + hi) - self.centroid, 0.5 * (hi - lo)
                 # (the box's middle off the centroid, its half-widths, and how far a unit turn moves its points)
                 self.centres.append((self.anchor[idx[0]], rel, half, np.linalg.norm(rel) + np.linalg.norm(half)))
+        # A plane touched three times or more has its normal in the measurement frame where its touches put it,
+        # whatever the pose, up to its sign: with the centres, that fixes the turn (:func:`first_turns`).
+        self.normals = []
+        for k in range(len(groups)):
+            idx = np.flatnonzero((owner == k) & (self.core == "plane"))
+            if len(idx) >= 3 and np.allclose(self.offset[idx], self.offset[idx[0]]):
+                normal = measured_normal(self.points[idx], self.root + self.dev[idx])
+                if normal is not None:
+                    self.normals.append((self.direction[idx[0]], *normal))
         # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
         # axes hold its touches' distances exactly and its last needs no split for them.
         lines = np.flatnonzero(self.round & (self.core == "line"))
@@ -366,9 +424,9 @@ class Tree:
         self.patch_half = np.where(bounded, 0.5 * (high - low) @ np.abs(self.Q), np.inf)
 
     def first_cells(self):
-        """The first level's cells: the rotation box (two past a half turn) that three touched spheres' centres leave
-        (:func:`centres_turn`), else every rotation (:func:`first_cells`); y unbounded."""
-        turn = centres_turn(self.centres)
+        """The first level's cells: the rotation boxes that touched spheres' centres and planes' normals leave
+        (:func:`first_turns`), else every rotation (:func:`first_cells`); y unbounded."""
+        turn = first_turns(self.centres, self.normals)
         if turn is None:
             return first_cells()
         v, w = turn

@@ -180,11 +180,16 @@ CASES = [
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),
     Case("one touch mislabelled, cube 3-3-3", "cube", (SIGMA_MM,), _mislabelled_touch),
-    # Three balls touched four times each: their centres fix the turn, and the search starts from the one rotation
-    # box they leave (search.centres_turn).
+    # Three balls touched four times each, or three planes: their centres, or their normals (either sign), fix the
+    # turn, and the search starts from the rotation boxes they leave (search.first_turns).
     Case("sphere-plate 4 per ball", "sphere-plate", (0.0, SIGMA_MM), _counts({"ball_1": 4, "ball_2": 4, "ball_3": 4})),
     Case("sphere-plate 4 per ball, printed", "sphere-plate", (0.0, SIGMA_MM),
          _counts({"ball_1": 4, "ball_2": 4, "ball_3": 4}), printed=True),
+    Case("cube 4-4-4", "cube", (0.0, SIGMA_MM), _counts({"top": 4, "front": 4, "left": 4})),
+    Case("cube 4-4-4, printed", "cube", (0.0, SIGMA_MM), _counts({"top": 4, "front": 4, "left": 4}), printed=True),
+    Case("v-block 4-4-4", "v-block", (0.0, SIGMA_MM), _counts({"groove_a": 4, "groove_b": 4, "end": 4})),
+    Case("v-block 4-4-4, printed", "v-block", (0.0, SIGMA_MM), _counts({"groove_a": 4, "groove_b": 4, "end": 4}),
+         printed=True),
 ]
 VARIANTS = [(case, noise) for case in CASES for noise in case.noise_mm]
 

@@ -13,8 +13,8 @@ from fixturecad.registration.features import Cylinder, Extent, features_from_jso
 from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import (Cells, Tree, _joined, across_rows, centres_turn, largest_swing, row_span,
-                                            search, stand_in_tree, threshold_mm2)
+from fixturecad.registration.search import (Cells, Tree, _joined, across_rows, first_turns, largest_swing,
+                                            measured_normal, row_span, search, stand_in_tree, threshold_mm2)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -187,7 +187,7 @@ def _edge_of_passing(cost, direction, threshold):
 @pytest.mark.parametrize("ball", [0.0, 3.0], ids=["point", "ball 3 mm"])
 def test_three_sphere_centres_start_the_search_in_a_box_that_holds_every_pose_that_passes(ball, printed):
     """The sphere-plate's three balls: on 20 layouts, 30 poses each on the edge of passing (the truth moved along
-    a random twist until the test's cost reaches T), the rotation box the centres leave (:func:`centres_turn`;
+    a random twist until the test's cost reaches T), the rotation box the centres leave (:func:`first_turns`;
     two past a half turn) holds each pose's rotation vector."""
     rng = np.random.default_rng(12)
     widths = []
@@ -195,7 +195,7 @@ def test_three_sphere_centres_start_the_search_in_a_box_that_holds_every_pose_th
         problem, R, t = _problem("sphere-plate", None, ball, rng, printed)
         tree = Tree(problem, threshold_mm2(problem))
         assert len(tree.centres) == 3
-        turn = centres_turn(tree.centres)
+        turn = first_turns(tree.centres, [])
         if turn is None:
             continue  # (the centres' boxes leave the turn open wider than a first-level cell)
         v0, w = turn
@@ -217,7 +217,7 @@ def test_three_sphere_centres_start_the_search_in_a_box_that_holds_every_pose_th
 def test_the_centres_turn_holds_every_turn_that_puts_each_centre_in_its_box():
     """200 layouts of three centres, each box 0.01-0.5 mm wide about a centre's true image: of 20,000 turns drawn
     about the box's middle, those for which some translation puts each centre in its box (the boxes less the turned
-    centres meet) have their rotation vectors in the box :func:`centres_turn` gives. It fails when the box is a
+    centres meet) have their rotation vectors in the box :func:`first_turns` gives. It fails when the box is a
     quarter as wide (the bound is loose: the farthest such turn found reaches up to half of it)."""
     rng = np.random.default_rng(13)
     reached = []
@@ -226,7 +226,7 @@ def test_the_centres_turn_holds_every_turn_that_puts_each_centre_in_its_box():
         R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
         half = rng.uniform(0.01, 0.5, (3, 3))
         middle = fixed @ R.T + t + rng.uniform(-1, 1, (3, 3)) * half
-        turn = centres_turn([(fixed[k], middle[k] - middle.mean(axis=0), half[k]) for k in range(3)])
+        turn = first_turns([(fixed[k], middle[k] - middle.mean(axis=0), half[k]) for k in range(3)], [])
         if turn is None:
             continue
         v0, w = turn
@@ -242,13 +242,58 @@ def test_the_centres_turn_holds_every_turn_that_puts_each_centre_in_its_box():
     assert len(reached) >= 150 and max(reached) > 0.1
 
 
+@pytest.mark.parametrize("count", [2, 3], ids=["two planes", "three planes"])
+def test_the_normals_turns_hold_every_turn_that_keeps_each_plane_s_touches_on_it(count):
+    """200 layouts of two or three planes at random angles, three to five touches each within 0.01-0.3 mm of
+    their plane at a random pose: of 20,000 turns drawn about each box :func:`first_turns` gives (and about the
+    truth), those under which each plane's touches still fit within their reach of one plane with the turned
+    fixture normal (their spans along it at most twice their reach apart) have rotation vectors in one of the
+    boxes. It fails when the boxes are a quarter as wide, or when only the normals' first sign is kept."""
+    rng = np.random.default_rng(14)
+    boxed = 0
+    for _ in range(200):
+        R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
+        normals, groups = [], []
+        for _ in range(count):
+            f = rng.normal(size=3)
+            f /= np.linalg.norm(f)
+            u, w = np.linalg.svd(f[None])[2][1:]
+            n = rng.integers(3, 6)
+            local = rng.uniform(-40, 40, (n, 1)) * u + rng.uniform(-40, 40, (n, 1)) * w + rng.uniform(-20, 20) * f
+            reach = rng.uniform(0.01, 0.3, n)
+            points = (local + rng.uniform(-1, 1, (n, 1)) * reach[:, None] * f) @ R.T + t
+            normal = measured_normal(points, reach)
+            if normal is not None:
+                normals.append((f, *normal))
+                groups.append((f, points, reach))
+        turn = first_turns([], normals)
+        if turn is None:
+            continue
+        boxed += 1
+        v0, w0 = turn
+        centres = np.vstack([v0, vector_from_rotation(R)[None]])
+        step = rng.normal(size=(20000, 3))
+        step *= 3 * w0.max() * rng.uniform(0, 1, (20000, 1)) ** (1 / 3) / np.linalg.norm(step, axis=1, keepdims=True)
+        turns = rotation_from_vector(centres[rng.integers(len(centres), size=20000)] + step)
+        fits = np.ones(len(turns), bool)
+        for f, points, reach in groups:
+            along = points @ (turns @ f).T  # (n, K): the touches along the turned normal
+            fits &= np.min(along.T + reach, axis=1) >= np.max(along.T - reach, axis=1)
+        v = vector_from_rotation(turns[fits])
+        inside = np.any(np.all(np.abs(v[:, None] - v0[None]) <= w0[None, :, None], axis=2), axis=1)
+        other = v - 2 * np.pi * v / np.linalg.norm(v, axis=1, keepdims=True)
+        inside |= np.any(np.all(np.abs(other[:, None] - v0[None]) <= w0[None, :, None], axis=2), axis=1)
+        assert np.all(inside)
+    assert boxed >= (150 if count == 3 else 100)
+
+
 def test_centres_in_a_line_leave_the_turn_open():
     """Two centres, or three in a line, leave a turn about their line free: the search starts from every rotation."""
     box = (np.zeros(3), np.full(3, 0.01))
     line = [(np.array([x, 0.0, 0.0]), np.array([x, 5.0, 0.0]) + box[0], box[1]) for x in (0.0, 40.0, 90.0)]
-    assert centres_turn(line[:2]) is None and centres_turn(line) is None
+    assert first_turns(line[:2], []) is None and first_turns(line, []) is None
     bent = line[:2] + [(np.array([0.0, 60.0, 0.0]), np.array([0.0, 65.0, 0.0]), box[1])]
-    v, w = centres_turn(bent)
+    v, w = first_turns(bent, [])
     assert np.allclose(v, 0.0, atol=1e-12) and len(w) == 1 and 1e-3 < w[0] < 3e-3  # 0.02 mm boxes 40-60 mm apart
 
 
