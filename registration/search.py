@@ -381,15 +381,6 @@ class Tree:
                 rel, half = 0.5 * (lo + hi) - self.centroid, 0.5 * (hi - lo)
                 # (the box's middle off the centroid, its half-widths, and how far a unit turn moves its points)
                 self.centres.append((self.anchor[idx[0]], rel, half, np.linalg.norm(rel) + np.linalg.norm(half)))
-        # A plane touched three times or more has its normal in the measurement frame where its touches put it,
-        # whatever the pose, up to its sign: with the centres, that fixes the turn (:func:`first_turns`).
-        self.normals = []
-        for k in range(len(groups)):
-            idx = np.flatnonzero((owner == k) & (self.core == "plane"))
-            if len(idx) >= 3 and np.allclose(self.offset[idx], self.offset[idx[0]]):
-                normal = measured_normal(self.points[idx], self.root + self.dev[idx])
-                if normal is not None:
-                    self.normals.append((self.direction[idx[0]], *normal))
         # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
         # axes hold its touches' distances exactly and its last needs no split for them.
         lines = np.flatnonzero(self.round & (self.core == "line"))
@@ -422,6 +413,21 @@ class Tree:
         low, high = np.where(bounded, self.low, 0.0), np.where(bounded, self.high, 0.0)
         self.patch_middle = 0.5 * (low + high)
         self.patch_half = np.where(bounded, 0.5 * (high - low) @ np.abs(self.Q), np.inf)
+
+    @functools.cached_property
+    def normals(self):
+        """Each plane touched three times or more, its normal in the measurement frame where its touches put it,
+        whatever the pose, up to its sign: (fixture normal, measured normal, phi) (:func:`measured_normal`). (Only
+        when asked: the unlabelled search builds many trees only to bound with them.)"""
+        out = []
+        ends = np.cumsum([g.count for g in self.problem.groups])
+        for start, end in zip(ends - [g.count for g in self.problem.groups], ends):
+            idx = np.arange(start, end)
+            if len(idx) >= 3 and np.all(self.core[idx] == "plane") and np.allclose(self.offset[idx], self.offset[start]):
+                normal = measured_normal(self.points[idx], self.root + self.dev[idx])
+                if normal is not None:
+                    out.append((self.direction[start], *normal))
+        return out
 
     def first_cells(self):
         """The first level's cells: the rotation boxes that touched spheres' centres and planes' normals leave
