@@ -251,18 +251,18 @@ def first_turns(centres, normals, most=FIRST_TURN_PLANES):
     sets = [np.arange(len(fixed)), planes, np.arange(len(pairs))] + [
         [k for k, (i, j) in enumerate(pairs) if base in (i, j)] for base in range(len(centres))]
     sets = [chosen for chosen in sets if len(chosen) >= 2]
+    f, e = fixed[planes], reach[planes]
+    differences = np.array([centres[j][1] - centres[i][1] for i, j in pairs], float).reshape(-1, 3)
     boxes = []
     for signs in itertools.product((1.0, -1.0), repeat=len(normals)):
-        measured = [centres[j][1] - centres[i][1] for i, j in pairs] + [s * n for s, (_, n, _) in zip(signs, normals)]
-        measured = np.array(measured, float).reshape(-1, 3)
-        f, g, e = fixed[planes], measured[planes], reach[planes]
+        g = np.array([s * n for s, (_, n, _) in zip(signs, normals)], float).reshape(-1, 3)
         angle_kept = all(abs(np.arccos(np.clip(f[k] @ f[m], -1, 1)) - np.arccos(np.clip(g[k] @ g[m], -1, 1)))
                          <= normals[k][2] + normals[m][2] for k, m in itertools.combinations(range(len(f)), 2))
         triple_kept = all(abs(np.linalg.det(f[list(c)]) - np.linalg.det(g[list(c)])) <= e[list(c)].sum()
                           for c in itertools.combinations(range(len(f)), 3))
         if not (angle_kept and triple_kept):
             continue  # no turn makes these signs
-        R, theta = turn_bound(fixed, measured, reach, sets)
+        R, theta = turn_bound(fixed, np.concatenate([differences, g]), reach, sets)
         if not theta < np.pi / FIRST_CELLS:
             return None
         boxes.append(rotation_boxes(R, theta))

@@ -68,9 +68,10 @@ def assigned_problem(groups, features, points, index, assignment, ball_radius_mm
         if fid is None:
             continue
         on = assignment == fid
-        if (fid, on.tobytes()) not in made:
-            made[fid, on.tobytes()] = point_touches(features[fid], points[on], index[on], ball_radius_mm)
-        extra.append(made[fid, on.tobytes()])
+        key = (fid, on.tobytes())
+        if key not in made:
+            made[key] = point_touches(features[fid], points[on], index[on], ball_radius_mm)
+        extra.append(made[key])
     return Problem(list(groups) + extra, sigma, lever, tolerance)
 
 

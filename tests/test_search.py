@@ -460,8 +460,8 @@ def test_leaves_are_joined_as_a_graph_library_joins_them():
 
 
 def test_memoised_pieces_answer_by_value():
-    """A tree's pieces memoised on their values (:func:`by_value`): the same values give the same answer, recomputed
-    once; other values their own; what is kept cannot be written to."""
+    """A tree's pieces memoised on their values (:func:`by_value`): the same values give the same answer (the very
+    object kept), other values their own; what is kept cannot be written to."""
     rng = np.random.default_rng(6)
     u = rng.normal(size=(5, 3))
     assert largest_swing(u.copy()) == largest_swing(u)
