@@ -88,6 +88,7 @@ NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
 WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses) tries its best pose on ``stop`` ...
 WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions' poses that pass
 FIRST_TURN_PLANES = 4  # planes' normals a search starts from at most (two signs each: 2^4 choices)
+TUBE_BOXES = 512  # rotation boxes about one plane's measured normal a search starts from at most, each sign
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter than this gives that core no slab
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
@@ -212,21 +213,68 @@ def turn_bound(fixed, measured, reach, sets):
 
 
 def rotation_boxes(R, theta):
-    """Rotation boxes (v (k, 3), half-widths (k,)) holding a rotation vector of every turn within theta of R: R's
-    vector v* within ``(g/2)/sin(g/2) theta``, ``g = |v*| + theta`` (:meth:`Tree.narrowed`), measured along a
-    path from R whose vector may leave the ball of radius pi; where the box reaches past pi, a second box about
-    v*'s other side ``v* - 2 pi v*/|v*|`` holds the other side ``p - 2 pi p/|p|`` of such a vector p, within
-    ``w + 2 pi |p/|p| - v*/|v*||``, and ``|p/|p| - v*/|v*|| <= 2 w / |v*|``."""
-    v = vector_from_rotation(R)
-    length = np.linalg.norm(v)
+    """Rotation boxes (v (k, 3), half-widths (k,)) holding a rotation vector of every turn within theta (rad) of
+    R (3, 3) or of each of R (m, 3, 3): R's vector v* within ``(g/2)/sin(g/2) theta``, ``g = |v*| + theta``
+    (:meth:`Tree.narrowed`), measured along a path from R whose vector may leave the ball of radius pi; where the
+    box reaches past pi, a second box (next to the first) about v*'s other side ``v* - 2 pi v*/|v*|`` holds the
+    other side ``p - 2 pi p/|p|`` of such a vector p, within ``w + 2 pi |p/|p| - v*/|v*||``, and ``|p/|p| -
+    v*/|v*|| <= 2 w / |v*|``; and within ``sqrt(3) max(1, 2 pi / m - 1) w``, m = ``|v*| - sqrt(3) w`` the
+    shortest vector of the box, where that is tighter: the map's Jacobian ``(1 - 2 pi/|p|) I + 2 pi p p^T /
+    |p|^3`` has singular values 1 and ``|1 - 2 pi/|p||``, and a matrix's row sums are at most sqrt(3) times
+    its largest singular value."""
+    v = vector_from_rotation(R).reshape(-1, 3)
+    theta = np.broadcast_to(np.asarray(theta, float), len(v))
+    length = np.linalg.norm(v, axis=1)
     g = length + theta
-    w = theta * (g / 2.0) / np.sin(g / 2.0) if g > 0.0 else theta
-    if np.linalg.norm(np.abs(v) + w) < np.pi:
-        return v[None], np.array([w])
-    return np.array([v, v - 2.0 * np.pi * v / length]), np.array([w, w * (1.0 + 4.0 * np.pi / length)])
+    with np.errstate(invalid="ignore", divide="ignore"):  # (a turn by 0 has no second box)
+        w = np.where(g > 0.0, theta * (g / 2.0) / np.sin(g / 2.0), theta)
+        least = length - np.sqrt(3.0) * w
+        stretch = np.where(least > 0.0, np.sqrt(3.0) * np.maximum(1.0, 2.0 * np.pi / least - 1.0), np.inf)
+        both = (np.stack([v, v - 2.0 * np.pi * v / length[:, None]], axis=1),
+                np.stack([w, w * np.minimum(1.0 + 4.0 * np.pi / length, stretch)], axis=1))
+    far = np.linalg.norm(np.abs(v) + w[:, None], axis=1) >= np.pi
+    taken = np.column_stack([np.ones(len(v), bool), far])
+    return both[0][taken], both[1][taken]
 
 
-def first_turns(centres, normals, most=FIRST_TURN_PLANES):
+def tube_turns(normal, pairs, most=TUBE_BOXES):
+    """Rotation boxes (v (k, 3), half-widths (k,), rad) that hold a rotation vector of every turn that moves a
+    plane's fixture normal f to within phi of its measured normal n* (``normal``: (f, n*, phi),
+    :func:`measured_normal`) and keeps each pair of touches on a plane within their reach of it (``pairs``:
+    (fixture normal f_b (m, 3), difference of the two touches d (m, 3), their reaches' sum e (m,))).
+
+    For either sign of n*, write g = +-n* and R0 a turn taking f to g. A turn R with ``angle(R f, g) <= phi``
+    is ``T^-1 Rot(g, alpha) R0`` with T the least turn taking R f to g: R lies within phi of the circle
+    ``Rot(g, alpha) R0``, and within ``phi + Delta`` of its point alpha_k when ``|alpha - alpha_k| <=
+    Delta``. A pair's ``|(R f_b).d| <= e`` then gives ``|h(alpha)| <= e + 2 sin(phi/2) |d|`` with ``h(alpha)
+    = (Rot(g, alpha) R0 f_b).d = C + A cos(alpha) + B sin(alpha)`` (T moves d by at most that chord), and
+    ``|h'| <= M = hypot(A, B)``: an interval of alpha of half-width Delta is dropped where ``|h(alpha_k)| - M
+    Delta`` exceeds it for some pair. The kept intervals are halved while they are wider than phi and their
+    number stays within ``most``; each gives :func:`rotation_boxes` of its turn and ``phi + Delta``."""
+    f, n, phi = normal
+    f_b, d, e = (np.asarray(a, float).reshape(-1, k) for a, k in zip(pairs, (3, 3, 1)))
+    slack = e[:, 0] + 2.0 * np.sin(phi / 2.0) * np.linalg.norm(d, axis=1)
+    rotations, widths = [], []
+    for g in (n, -n):
+        R0 = np.column_stack([*perpendicular_basis(g), g]) @ np.column_stack([*perpendicular_basis(f), f]).T
+        b = f_b @ R0.T
+        along = b @ g
+        C, A, B = along * (d @ g), np.sum(d * (b - along[:, None] * g), axis=1), np.sum(d * cross(g, b), axis=1)
+        M = np.hypot(A, B)
+        half = np.pi / FIRST_CELLS
+        alpha = -np.pi + half * (2 * np.arange(FIRST_CELLS) + 1)
+        while True:
+            h = C + np.cos(alpha)[:, None] * A + np.sin(alpha)[:, None] * B
+            alpha = alpha[np.all(np.abs(h) - M * half <= slack, axis=1)]
+            if not (half > phi and 0 < 2 * len(alpha) <= most):
+                break
+            alpha, half = np.concatenate([alpha - half / 2.0, alpha + half / 2.0]), half / 2.0
+        rotations.append(rotation_from_vector(alpha[:, None] * g) @ R0)
+        widths.append(np.full(len(alpha), half + phi))
+    return rotation_boxes(np.concatenate(rotations), np.concatenate(widths))
+
+
+def first_turns(centres, normals, plane_pairs=((), (), ()), most=FIRST_TURN_PLANES):
     """Rotation boxes (v (k, 3), half-widths (k,), rad) that hold a rotation vector of every turn that passes, as
     touched spheres' centres and planes' normals fix it whatever the pose, or None where they leave it open wider
     than a first-level cell.
@@ -238,7 +286,9 @@ def first_turns(centres, normals, most=FIRST_TURN_PLANES):
     turns, and a choice is dropped where no turn can make it: two normals' angle is kept by a turn (within
     ``phi_k + phi_l``), and three normals' triple product (within the sum of their chords). The bound
     (:func:`turn_bound`) over every difference and normal, the centres' differences alone (every pair, each
-    base's), and the normals alone; the boxes (:func:`rotation_boxes`) of every choice that a turn can make."""
+    base's), and the normals alone; the boxes (:func:`rotation_boxes`) of every choice that a turn can make.
+    Where that bound is open, the boxes about the tightest normal that ``plane_pairs``, pairs of touches on
+    planes, leave (:func:`tube_turns`)."""
     normals = sorted(normals, key=lambda n: n[2])[:most]
     pairs = list(itertools.combinations(range(len(centres)), 2))
     fixed = [centres[j][0] - centres[i][0] for i, j in pairs] + [f for f, _, _ in normals]
@@ -264,7 +314,7 @@ def first_turns(centres, normals, most=FIRST_TURN_PLANES):
             continue  # no turn makes these signs
         R, theta = turn_bound(fixed, np.concatenate([differences, g]), reach, sets)
         if not theta < np.pi / FIRST_CELLS:
-            return None
+            return tube_turns(normals[0], plane_pairs) if normals else None
         boxes.append(rotation_boxes(R, theta))
     if not boxes:
         return None
@@ -415,24 +465,31 @@ class Tree:
         self.patch_half = np.where(bounded, 0.5 * (high - low) @ np.abs(self.Q), np.inf)
 
     @functools.cached_property
-    def normals(self):
-        """Each plane touched three times or more, its normal in the measurement frame where its touches put it,
-        whatever the pose, up to its sign: (fixture normal, measured normal, phi) (:func:`measured_normal`). (Only
-        when asked: the unlabelled search builds many trees only to bound with them.)"""
+    def planes(self):
+        """Each plane touched twice or more: (fixture normal, its touches in the measurement frame, their reach
+        in mm). (Only when asked: the unlabelled search builds many trees only to bound with them.)"""
         out = []
         ends = np.cumsum([g.count for g in self.problem.groups])
         for start, end in zip(ends - [g.count for g in self.problem.groups], ends):
             idx = np.arange(start, end)
-            if len(idx) >= 3 and np.all(self.core[idx] == "plane") and np.allclose(self.offset[idx], self.offset[start]):
-                normal = measured_normal(self.points[idx], self.root + self.dev[idx])
-                if normal is not None:
-                    out.append((self.direction[start], *normal))
+            if len(idx) >= 2 and np.all(self.core[idx] == "plane") and np.allclose(self.offset[idx], self.offset[start]):
+                out.append((self.direction[start], self.points[idx], self.root + self.dev[idx]))
         return out
 
+    @functools.cached_property
+    def normals(self):
+        """Each plane touched three times or more, its normal in the measurement frame where its touches put it,
+        whatever the pose, up to its sign: (fixture normal, measured normal, phi) (:func:`measured_normal`)."""
+        measured = [(f, measured_normal(points, reach)) for f, points, reach in self.planes if len(points) >= 3]
+        return [(f, *normal) for f, normal in measured if normal is not None]
+
     def first_cells(self):
-        """The first level's cells: the rotation boxes that touched spheres' centres and planes' normals leave
-        (:func:`first_turns`), else every rotation (:func:`first_cells`); y unbounded."""
-        turn = first_turns(self.centres, self.normals)
+        """The first level's cells: the rotation boxes that touched spheres' centres and planes' normals, and
+        pairs of touches on planes, leave (:func:`first_turns`), else every rotation (:func:`first_cells`); y
+        unbounded."""
+        pairs = [(f, points[j] - points[i], reach[i] + reach[j]) for f, points, reach in self.planes
+                 for i, j in itertools.combinations(range(len(points)), 2)]
+        turn = first_turns(self.centres, self.normals, tuple(zip(*pairs)) if pairs else ((), (), ()))
         if turn is None:
             return first_cells()
         v, w = turn

@@ -190,6 +190,15 @@ CASES = [
     Case("v-block 4-4-4", "v-block", (0.0, SIGMA_MM), _counts({"groove_a": 4, "groove_b": 4, "end": 4})),
     Case("v-block 4-4-4, printed", "v-block", (0.0, SIGMA_MM), _counts({"groove_a": 4, "groove_b": 4, "end": 4}),
          printed=True),
+    # One plane touched three times or more fixes its normal, either sign, and the turn about it is searched along
+    # the circle it leaves, cut by pairs of touches on another plane (search.tube_turns): the quarter-sphere's and
+    # the inclined plane's point-probe plans.
+    Case("quarter-sphere 3-2-2", "quarter-sphere", (0.0, SIGMA_MM), _counts({"flat_a": 3, "flat_b": 2, "sphere": 2})),
+    Case("quarter-sphere 3-2-2, printed", "quarter-sphere", (0.0, SIGMA_MM),
+         _counts({"flat_a": 3, "flat_b": 2, "sphere": 2}), printed=True),
+    Case("inclined-plane-cylinder 6+8", "inclined-plane-cylinder", (0.0, SIGMA_MM), _counts({"plane": 6, "cylinder": 8})),
+    Case("inclined-plane-cylinder 6+8, printed", "inclined-plane-cylinder", (0.0, SIGMA_MM),
+         _counts({"plane": 6, "cylinder": 8}), printed=True),
 ]
 VARIANTS = [(case, noise) for case in CASES for noise in case.noise_mm]
 

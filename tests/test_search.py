@@ -2,6 +2,8 @@
 against poses sampled where it claims none passes; tests/test_solution_search.py checks the whole search
 against an independent brute force."""
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy.sparse import csr_matrix
@@ -13,8 +15,9 @@ from fixturecad.registration.features import Cylinder, Extent, features_from_jso
 from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import (Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, row_span, search, stand_in_tree, threshold_mm2)
+from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
+                                            measured_normal, rotation_boxes, row_span, search, stand_in_tree,
+                                            threshold_mm2)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -183,6 +186,27 @@ def _edge_of_passing(cost, direction, threshold):
     return low * direction
 
 
+def in_boxes(v, v0, w0):
+    """Whether each rotation vector v (k, 3), within pi, lies in one of the boxes (v0 (m, 3), half-widths w0 (m,)),
+    or, a half turn's, has its other vector -v in one: the search drops a box wholly past pi
+    (:func:`.search.beyond_pi`), so a turn's own vector must lie in a box."""
+    inside = np.any(np.all(np.abs(v[:, None] - v0[None]) <= w0[None, :, None], axis=2), axis=1)
+    other = v - 2 * np.pi * v / np.linalg.norm(v, axis=1, keepdims=True)
+    half_turn = np.linalg.norm(v, axis=1) > np.pi - 1e-9
+    return inside | half_turn & np.any(np.all(np.abs(other[:, None] - v0[None]) <= w0[None, :, None], axis=2), axis=1)
+
+
+def keep_planes(turns, groups):
+    """Whether each turn (K, 3, 3) keeps each plane's touches within their reach of one plane with its turned
+    fixture normal: their spans along it at most twice their reach apart (``groups``: (fixture normal, touches
+    (n, 3), reach (n,)))."""
+    fits = np.ones(len(turns), bool)
+    for f, points, reach in groups:
+        along = points @ (turns @ f).T  # (n, K): the touches along the turned normal
+        fits &= np.min(along.T + reach, axis=1) >= np.max(along.T - reach, axis=1)
+    return fits
+
+
 @pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
 @pytest.mark.parametrize("ball", [0.0, 3.0], ids=["point", "ball 3 mm"])
 def test_three_sphere_centres_start_the_search_in_a_box_that_holds_every_pose_that_passes(ball, printed):
@@ -275,16 +299,67 @@ def test_the_normals_turns_hold_every_turn_that_keeps_each_plane_s_touches_on_it
         step = rng.normal(size=(20000, 3))
         step *= 3 * w0.max() * rng.uniform(0, 1, (20000, 1)) ** (1 / 3) / np.linalg.norm(step, axis=1, keepdims=True)
         turns = rotation_from_vector(centres[rng.integers(len(centres), size=20000)] + step)
-        fits = np.ones(len(turns), bool)
-        for f, points, reach in groups:
-            along = points @ (turns @ f).T  # (n, K): the touches along the turned normal
-            fits &= np.min(along.T + reach, axis=1) >= np.max(along.T - reach, axis=1)
-        v = vector_from_rotation(turns[fits])
-        inside = np.any(np.all(np.abs(v[:, None] - v0[None]) <= w0[None, :, None], axis=2), axis=1)
-        other = v - 2 * np.pi * v / np.linalg.norm(v, axis=1, keepdims=True)
-        inside |= np.any(np.all(np.abs(other[:, None] - v0[None]) <= w0[None, :, None], axis=2), axis=1)
-        assert np.all(inside)
+        assert np.all(in_boxes(vector_from_rotation(turns[keep_planes(turns, groups)]), v0, w0))
     assert boxed >= (150 if count == 3 else 100)
+
+
+@pytest.mark.parametrize("second", [0, 2, 3], ids=["one plane", "and a pair", "and three touches"])
+def test_the_tube_about_one_normal_holds_every_turn_that_keeps_each_plane_s_touches_on_it(second):
+    """200 layouts of a plane touched three to five times and, at a random angle, none or a second plane touched
+    two or three times (its own normal left out, so that the turn about the first is bounded by its pairs of
+    touches alone), each touch within 0.01-0.3 mm of its plane at a random pose: the boxes about the first
+    plane's normal (:func:`first_turns`, :func:`tube_turns`) hold the rotation vector of every turn, of 20,000
+    drawn about the boxes and the truth, under which each plane's touches still fit within their reach of it.
+    It fails when an interval's Lipschitz term or the normal's sign -n* is left out, or the boxes are a quarter
+    as wide."""
+    rng = np.random.default_rng(15)
+    counts = []
+    for _ in range(200):
+        R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
+        groups = []
+        for n in (rng.integers(3, 6), second):
+            f = rng.normal(size=3)
+            f /= np.linalg.norm(f)
+            u, w = np.linalg.svd(f[None])[2][1:]
+            local = rng.uniform(-40, 40, (n, 1)) * u + rng.uniform(-40, 40, (n, 1)) * w + rng.uniform(-20, 20) * f
+            reach = rng.uniform(0.01, 0.3, n)
+            groups.append((f, (local + rng.uniform(-1, 1, (n, 1)) * reach[:, None] * f) @ R.T + t, reach))
+        normal = measured_normal(groups[0][1], groups[0][2])
+        if normal is None:
+            continue
+        pairs = [(f, points[j] - points[i], reach[i] + reach[j]) for f, points, reach in groups
+                 for i, j in itertools.combinations(range(len(points)), 2)]
+        v0, w0 = first_turns([], [(groups[0][0], *normal)], tuple(zip(*pairs)))
+        counts.append(len(v0))
+        pick = rng.integers(len(v0) + 1, size=20000)
+        centres, radii = np.vstack([v0, vector_from_rotation(R)[None]]), 3 * np.append(w0, w0.max())
+        step = rng.normal(size=(20000, 3))
+        step *= (radii[pick] * rng.uniform(0, 1, 20000) ** (1 / 3) / np.linalg.norm(step, axis=1))[:, None]
+        turns = rotation_from_vector(centres[pick] + step)
+        assert np.all(in_boxes(vector_from_rotation(turns[keep_planes(turns, groups[:1 + bool(second)])]), v0, w0))
+    assert len(counts) >= 150
+    # Pairs on a second plane pin the turn about the first normal to a few narrow intervals; without them the
+    # whole circle is kept, in boxes about as wide as phi.
+    assert np.median(counts) <= 32 if second else np.median(counts) >= 256
+
+
+def test_rotation_boxes_hold_every_turn_within_theta_even_past_a_half_turn():
+    """500 turns R, half of them within 0.3 rad of a half turn, and theta of 0.001-0.3 rad: the boxes
+    :func:`rotation_boxes` gives hold a rotation vector (either side, past a half turn) of each of 2,000 turns
+    within theta of R, drawn on the sphere of radius theta about it and within: the search drops a box wholly
+    past pi, so a turn's own vector (within pi) must lie in one (:func:`in_boxes`). It fails when the
+    second box past a half turn leaves out its second side, or takes 0.3 or 0.8 for the sqrt(3) of its stretch."""
+    rng = np.random.default_rng(16)
+    for k in range(500):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R = rotation_from_vector(axis * (np.pi - rng.uniform(0, 0.3) if k % 2 else rng.uniform(0, np.pi)))
+        theta = rng.uniform(0.001, 0.3)
+        v0, w0 = rotation_boxes(R, theta)
+        step = rng.normal(size=(2000, 3))
+        step *= (theta * np.where(np.arange(2000) < 1000, 1.0, rng.uniform(0, 1, 2000)) /
+                 np.linalg.norm(step, axis=1))[:, None]
+        assert np.all(in_boxes(vector_from_rotation(R @ rotation_from_vector(step)), v0, w0))
 
 
 def test_centres_in_a_line_leave_the_turn_open():
