@@ -288,7 +288,7 @@ def first_turns(centres, normals, plane_pairs=((), (), ()), most=FIRST_TURN_PLAN
     (:func:`turn_bound`) over every difference and normal, the centres' differences alone (every pair, each
     base's), and the normals alone; the boxes (:func:`rotation_boxes`) of every choice that a turn can make.
     Where that bound is open, the boxes about the tightest normal that ``plane_pairs``, pairs of touches on
-    planes, leave (:func:`tube_turns`)."""
+    planes, leave (:func:`tube_turns`), unless that normal's own phi is as wide as a first-level cell."""
     normals = sorted(normals, key=lambda n: n[2])[:most]
     pairs = list(itertools.combinations(range(len(centres)), 2))
     fixed = [centres[j][0] - centres[i][0] for i, j in pairs] + [f for f, _, _ in normals]
@@ -314,7 +314,7 @@ def first_turns(centres, normals, plane_pairs=((), (), ()), most=FIRST_TURN_PLAN
             continue  # no turn makes these signs
         R, theta = turn_bound(fixed, np.concatenate([differences, g]), reach, sets)
         if not theta < np.pi / FIRST_CELLS:
-            return tube_turns(normals[0], plane_pairs) if normals else None
+            return tube_turns(normals[0], plane_pairs) if normals and normals[0][2] < np.pi / FIRST_CELLS else None
         boxes.append(rotation_boxes(R, theta))
     if not boxes:
         return None

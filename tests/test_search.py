@@ -329,7 +329,10 @@ def test_the_tube_about_one_normal_holds_every_turn_that_keeps_each_plane_s_touc
             continue
         pairs = [(f, points[j] - points[i], reach[i] + reach[j]) for f, points, reach in groups
                  for i, j in itertools.combinations(range(len(points)), 2)]
-        v0, w0 = first_turns([], [(groups[0][0], *normal)], tuple(zip(*pairs)))
+        turn = first_turns([], [(groups[0][0], *normal)], tuple(zip(*pairs)))
+        if turn is None:
+            continue  # (the normal is as loose as a first-level cell)
+        v0, w0 = turn
         counts.append(len(v0))
         pick = rng.integers(len(v0) + 1, size=20000)
         centres, radii = np.vstack([v0, vector_from_rotation(R)[None]]), 3 * np.append(w0, w0.max())
