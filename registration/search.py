@@ -915,6 +915,10 @@ class Tree:
             turn = c.delta * self.marker_rho.max()
             shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) \
                 if self.round.any() or self.sensors is not None else np.zeros(len(c.v))
+            if self.centres:
+                # The y box that touched spheres' centres bound is about as wide as the turn moves them, on each
+                # axis: a split of y cannot narrow that part, a split of the turn does.
+                shift = shift - np.sqrt(3.0) * c.delta * min(lever for *_, lever in self.centres)
             # A y box still unbounded (unbounded patches) has no middle to split at: its turn is split.
             turning = (turn >= shift) | ~np.isfinite(shift)
             if 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS or sum(len(d.v) for d in done) > MAX_LEAVES:
