@@ -224,18 +224,41 @@ def test_three_sphere_centres_start_the_search_in_a_box_that_holds_every_pose_th
             continue  # (the centres' boxes leave the turn open wider than a first-level cell)
         v0, w = turn
         widths.append(w[0])
-        scale = np.concatenate([np.full(3, 1.0 / tree.rho.max()), np.ones(3)])
-
-        def cost(twist):
-            Rk = R @ rotation_from_vector(twist[:3])
-            r = tree.judge.evaluate(Rk, t + twist[3:])[0]
-            return r @ r
-
-        for _ in range(30):
-            twist = _edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2)
-            v = vector_from_rotation(R @ rotation_from_vector(twist[:3]))
-            assert np.any(np.all(np.abs(v - v0) <= w[:, None], axis=1))
+        assert np.all(in_boxes(_edge_turns(tree, R, t, rng), v0, w))
     assert len(widths) >= 15 and np.median(widths) < np.radians(10.0 if printed else 2.0)
+
+
+@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
+@pytest.mark.parametrize("name,counts", [("quarter-sphere", {"flat_a": 3, "flat_b": 2, "sphere": 2}),
+                                         ("inclined-plane-cylinder", {"plane": 6, "cylinder": 8})],
+                         ids=["quarter-sphere 3-2-2", "inclined plane 6+8"])
+def test_one_plane_s_tube_starts_the_search_in_boxes_that_hold_every_pose_that_passes(name, counts, printed):
+    """The quarter-sphere's and the inclined plane's point-probe plans (one plane touched three times or more, and
+    on the quarter-sphere a pair on the other flat): on 20 layouts, 30 poses each on the edge of passing, the
+    search's first cells (:meth:`Tree.first_cells`: the tube about the plane's normal, :func:`tube_turns`) hold
+    each pose's rotation vector. It fails when the tube's boxes are a quarter as wide."""
+    rng = np.random.default_rng(17)
+    tubes = 0
+    for _ in range(20):
+        problem, R, t = _problem(name, counts, 0.0, rng, printed)
+        tree = Tree(problem, threshold_mm2(problem))
+        v0, w0 = tree.first_cells()[:2]
+        tubes += len(tree.normals) == 1 and tree.normals[0][2] < np.pi / 8
+        assert np.all(in_boxes(_edge_turns(tree, R, t, rng), v0, w0))
+    assert tubes >= 15
+
+
+def _edge_turns(tree, R, t, rng, count=30):
+    """Rotation vectors (count, 3) of poses on the edge of passing the tree's test: the truth (R, t) moved along
+    a random twist until the test's cost reaches T."""
+    scale = np.concatenate([np.full(3, 1.0 / tree.rho.max()), np.ones(3)])
+
+    def cost(twist):
+        r = tree.judge.evaluate(R @ rotation_from_vector(twist[:3]), t + twist[3:])[0]
+        return r @ r
+
+    twists = [_edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2) for _ in range(count)]
+    return vector_from_rotation(R @ rotation_from_vector(np.array(twists)[:, :3]))
 
 
 def test_the_centres_turn_holds_every_turn_that_puts_each_centre_in_its_box():
