@@ -82,13 +82,20 @@ class Problem:
         """How each (whitened) row changes as its feature's radius grows, shape (m,) per mm.
 
         Kept while the pose stays within ``RADIUS_DERIVATIVE_REACH`` (rad, mm):
-        it hardly changes with the pose, and it costs two evaluations.
+        it hardly changes with the pose, and it costs two evaluations (a central difference), but for point
+        touches alone, whose rows fall by exactly a sphere's or cylinder's growth.
         """
         if self._radius_derivative is not None:
             R0, t0, value = self._radius_derivative
             if np.abs(rotation - R0).max() < RADIUS_DERIVATIVE_REACH and np.abs(translation - t0).max() < RADIUS_DERIVATIVE_REACH:
                 return value
-        value = _radius_difference(lambda grow: self.sensor_rows(rotation, translation, grow)[0])
+        if all(g.ctype.sensor == "P" for g in self.batches):
+            # A point touch's row is its distance from the surface: a grown sphere or cylinder takes exactly that off.
+            self._count_rows()
+            value = np.concatenate([np.full(g.count * g.rows, -1.0 if "r" in g.fixture.geometry else 0.0)
+                                    for g in self.batches])
+        else:
+            value = _radius_difference(lambda grow: self.sensor_rows(rotation, translation, grow)[0])
         self._radius_derivative = (rotation, translation, value)
         return value
 

@@ -235,6 +235,27 @@ def test_rows_whitened_for_the_print_as_the_dense_covariance_says(name):
     assert np.allclose(whiten(r), W @ r) and np.allclose(whiten(J), W @ J)
 
 
+@pytest.mark.parametrize("name", NAMES)
+def test_point_touches_radius_derivative_is_the_central_difference(name):
+    """Point touches alone take their rows' change with a feature's radius as -1 on a sphere or cylinder and 0 on
+    a plane: the same, to 1e-9, as the central difference of the rows with the radius grown and shrunk, which
+    every other touch takes; at five poses of each template's point touches."""
+    from fixturecad.registration.problem import Problem, _radius_difference
+    from fixturecad.registration.touches import build_groups
+
+    template, features = nominal(name)
+    touches = {}
+    for entry in template.touch_plans()["default"].touches:
+        if "sensor" not in entry:
+            touches.setdefault(entry["feature"], []).extend(np.reshape(entry["points"], (-1, 3)).tolist())
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        problem = Problem(build_groups(features, touches), 0.005)
+        R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
+        central = _radius_difference(lambda grow: problem.sensor_rows(R, t, grow)[0])
+        assert np.allclose(problem.radius_derivative(R, t), central, atol=1e-9)
+
+
 def test_ten_thousand_touches_on_a_printed_part_take_memory_linear_in_rows():
     """Evaluating 10,000 rows on a printed part allocates a few MB, not the 800 MB of a dense covariance."""
     import tracemalloc
