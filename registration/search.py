@@ -274,7 +274,16 @@ def tube_turns(normal, pairs, most=TUBE_BOXES):
     return rotation_boxes(np.concatenate(rotations), np.concatenate(widths))
 
 
-def first_turns(centres, normals, plane_pairs=((), (), ()), most=FIRST_TURN_PLANES):
+def plane_pairs(planes):
+    """Every pair of touches on one plane, from each plane's (fixture normal, touches (n, 3), reach (n,) mm), as
+    :func:`tube_turns` takes them: (fixture normals (m, 3), the touches' differences (m, 3), their reaches' sums
+    (m,))."""
+    pairs = [(f, points[j] - points[i], reach[i] + reach[j]) for f, points, reach in planes
+             for i, j in itertools.combinations(range(len(points)), 2)]
+    return tuple(zip(*pairs)) if pairs else ((), (), ())
+
+
+def first_turns(centres, normals, pairs_on_planes=((), (), ()), most=FIRST_TURN_PLANES):
     """Rotation boxes (v (k, 3), half-widths (k,), rad) that hold a rotation vector of every turn that passes, as
     touched spheres' centres and planes' normals fix it whatever the pose, or None where they leave it open wider
     than a first-level cell.
@@ -287,8 +296,8 @@ def first_turns(centres, normals, plane_pairs=((), (), ()), most=FIRST_TURN_PLAN
     ``phi_k + phi_l``), and three normals' triple product (within the sum of their chords). The bound
     (:func:`turn_bound`) over every difference and normal, the centres' differences alone (every pair, each
     base's), and the normals alone; the boxes (:func:`rotation_boxes`) of every choice that a turn can make.
-    Where that bound is open, the boxes about the tightest normal that ``plane_pairs``, pairs of touches on
-    planes, leave (:func:`tube_turns`), unless that normal's own phi is as wide as a first-level cell."""
+    Where that bound is open, the boxes about the tightest normal that ``pairs_on_planes`` (:func:`plane_pairs`)
+    leave (:func:`tube_turns`), unless that normal's own phi is as wide as a first-level cell."""
     normals = sorted(normals, key=lambda n: n[2])[:most]
     pairs = list(itertools.combinations(range(len(centres)), 2))
     fixed = [centres[j][0] - centres[i][0] for i, j in pairs] + [f for f, _, _ in normals]
@@ -314,7 +323,7 @@ def first_turns(centres, normals, plane_pairs=((), (), ()), most=FIRST_TURN_PLAN
             continue  # no turn makes these signs
         R, theta = turn_bound(fixed, np.concatenate([differences, g]), reach, sets)
         if not theta < np.pi / FIRST_CELLS:
-            return tube_turns(normals[0], plane_pairs) if normals and normals[0][2] < np.pi / FIRST_CELLS else None
+            return tube_turns(normals[0], pairs_on_planes) if normals and normals[0][2] < np.pi / FIRST_CELLS else None
         boxes.append(rotation_boxes(R, theta))
     if not boxes:
         return None
@@ -383,7 +392,7 @@ class Tree:
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
-        owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])  # each touch's group
+        self.owner = owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])  # each touch's group
         flat = np.flatnonzero(self.flat)
         spans = [row_span(self.core[i] == "plane", self.direction[i]) for i in flat]
         self.row_touch = np.repeat(flat, [len(m) for m in spans]).astype(int)
@@ -469,11 +478,10 @@ class Tree:
         """Each plane touched twice or more: (fixture normal, its touches in the measurement frame, their reach
         in mm). (Only when asked: the unlabelled search builds many trees only to bound with them.)"""
         out = []
-        ends = np.cumsum([g.count for g in self.problem.groups])
-        for start, end in zip(ends - [g.count for g in self.problem.groups], ends):
-            idx = np.arange(start, end)
-            if len(idx) >= 2 and np.all(self.core[idx] == "plane") and np.allclose(self.offset[idx], self.offset[start]):
-                out.append((self.direction[start], self.points[idx], self.root + self.dev[idx]))
+        for k in range(len(self.problem.groups)):
+            idx = np.flatnonzero(self.owner == k)
+            if len(idx) >= 2 and np.all(self.core[idx] == "plane") and np.allclose(self.offset[idx], self.offset[idx[0]]):
+                out.append((self.direction[idx[0]], self.points[idx], self.root + self.dev[idx]))
         return out
 
     @functools.cached_property
@@ -487,9 +495,7 @@ class Tree:
         """The first level's cells: the rotation boxes that touched spheres' centres and planes' normals, and
         pairs of touches on planes, leave (:func:`first_turns`), else every rotation (:func:`first_cells`); y
         unbounded."""
-        pairs = [(f, points[j] - points[i], reach[i] + reach[j]) for f, points, reach in self.planes
-                 for i, j in itertools.combinations(range(len(points)), 2)]
-        turn = first_turns(self.centres, self.normals, tuple(zip(*pairs)) if pairs else ((), (), ()))
+        turn = first_turns(self.centres, self.normals, plane_pairs(self.planes))
         if turn is None:
             return first_cells()
         v, w = turn

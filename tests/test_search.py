@@ -2,8 +2,6 @@
 against poses sampled where it claims none passes; tests/test_solution_search.py checks the whole search
 against an independent brute force."""
 
-import itertools
-
 import numpy as np
 import pytest
 from scipy.sparse import csr_matrix
@@ -16,8 +14,8 @@ from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, rotation_boxes, row_span, search, stand_in_tree,
-                                            threshold_mm2)
+                                            measured_normal, plane_pairs, rotation_boxes, row_span, search,
+                                            stand_in_tree, threshold_mm2)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -350,9 +348,7 @@ def test_the_tube_about_one_normal_holds_every_turn_that_keeps_each_plane_s_touc
         normal = measured_normal(groups[0][1], groups[0][2])
         if normal is None:
             continue
-        pairs = [(f, points[j] - points[i], reach[i] + reach[j]) for f, points, reach in groups
-                 for i, j in itertools.combinations(range(len(points)), 2)]
-        turn = first_turns([], [(groups[0][0], *normal)], tuple(zip(*pairs)))
+        turn = first_turns([], [(groups[0][0], *normal)], plane_pairs(groups))
         if turn is None:
             continue  # (the normal is as loose as a first-level cell)
         v0, w0 = turn

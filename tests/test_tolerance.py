@@ -19,6 +19,15 @@ def nominal(name):
     return template, {f.id: f for f in template.features()}
 
 
+def point_touches_of(template):
+    """The point touches of a template's default plan, by feature (its sensors left out)."""
+    touches = {}
+    for entry in template.touch_plans()["default"].touches:
+        if "sensor" not in entry:
+            touches.setdefault(entry["feature"], []).extend(np.reshape(entry["points"], (-1, 3)).tolist())
+    return touches
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_mode_coordinates_read_back(name):
     """A feature deviated by known coordinates reads them back (to second order in the deviation)."""
@@ -221,10 +230,7 @@ def test_rows_whitened_for_the_print_as_the_dense_covariance_says(name):
 
     template, features = nominal(name)
     tolerance = FixtureTolerance(features, template.DATUMS, 0.1)
-    touches = {}
-    for entry in template.touch_plans()["default"].touches:
-        if "sensor" not in entry:
-            touches.setdefault(entry["feature"], []).extend(np.reshape(entry["points"], (-1, 3)).tolist())
+    touches = point_touches_of(template)
     problem = Problem(build_groups(features, touches), 0.005, tolerance=tolerance)
     r, J = problem.sensor_rows(np.eye(3), np.zeros(3))
     Jd = deviation_rows(problem, tolerance, np.eye(3), np.zeros(3), J)
@@ -244,13 +250,10 @@ def test_point_touches_radius_derivative_is_the_central_difference(name):
     from fixturecad.registration.touches import build_groups
 
     template, features = nominal(name)
-    touches = {}
-    for entry in template.touch_plans()["default"].touches:
-        if "sensor" not in entry:
-            touches.setdefault(entry["feature"], []).extend(np.reshape(entry["points"], (-1, 3)).tolist())
+    touches = point_touches_of(template)
     rng = np.random.default_rng(5)
     for _ in range(5):
-        problem = Problem(build_groups(features, touches), 0.005)
+        problem = Problem(build_groups(features, touches), 0.005)  # (a fresh one: it keeps a derivative per pose)
         R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
         central = _radius_difference(lambda grow: problem.sensor_rows(R, t, grow)[0])
         assert np.allclose(problem.radius_derivative(R, t), central, atol=1e-9)
