@@ -237,25 +237,44 @@ def rotation_boxes(R, theta):
     return both[0][taken], both[1][taken]
 
 
+def normal_signs(normal, plane, level, others, heights):
+    """The signs s for which a turn can take a plane's fixture normal f to within phi of ``s n*`` (``normal``: (f,
+    n*, phi), :func:`measured_normal`) with the plane's touches ``plane`` (n, 3) and every other touch ``others``
+    (m, 3) where they may lie: ``level`` (lo, hi), mm, holds ``f.x`` of the plane's touches' centroid in the
+    fixture frame, and ``heights`` (m, 2) that of each other touch (its grown patch box's range along f). A turn
+    R puts the other touch at ``x = R^T (p - t)``, whose height ``f.x = (R f).(p - c) + f.x_c`` (c the centroid),
+    and R f lies within ``2 sin(phi/2)`` of s n*: a sign is kept where every touch's ``s n*.(p - c) + level +- 2
+    sin(phi/2) |p - c|`` meets its heights."""
+    _, n, phi = normal
+    d = others - plane.mean(axis=0)
+    chord = 2.0 * np.sin(phi / 2.0) * np.linalg.norm(d, axis=1)
+    return tuple(s for s in (1.0, -1.0) if np.all((s * d @ n + level[1] + chord >= heights[:, 0]) &
+                                                  (s * d @ n + level[0] - chord <= heights[:, 1])))
+
+
 def tube_turns(normal, pairs, most=TUBE_BOXES):
     """Rotation boxes (v (k, 3), half-widths (k,), rad) that hold a rotation vector of every turn that moves a
-    plane's fixture normal f to within phi of its measured normal n* (``normal``: (f, n*, phi),
-    :func:`measured_normal`) and keeps each pair of touches on a plane within their reach of it (``pairs``:
-    (fixture normal f_b (m, 3), difference of the two touches d (m, 3), their reaches' sum e (m,))).
+    plane's fixture normal f to within phi of its measured normal n* with one of its signs (``normal``: (f, n*,
+    phi, signs), :func:`measured_normal`, :func:`normal_signs`) and keeps each pair of touches as its element
+    keeps them (``pairs``, :func:`tube_pairs`: a fixture direction f_b (m, 3), the touches' difference d (m, 3),
+    and bounds on ``|(R f_b).d|`` (m,), mm: at most ``upper`` for two touches on a plane, f_b its normal; at
+    least ``lower`` for two on a line or cylinder, f_b its axis).
 
-    For either sign of n*, write g = +-n* and R0 a turn taking f to g. A turn R with ``angle(R f, g) <= phi``
+    For each sign s, write g = s n* and R0 a turn taking f to g. A turn R with ``angle(R f, g) <= phi``
     is ``T^-1 Rot(g, alpha) R0`` with T the least turn taking R f to g: R lies within phi of the circle
     ``Rot(g, alpha) R0``, and within ``phi + Delta`` of its point alpha_k when ``|alpha - alpha_k| <=
-    Delta``. A pair's ``|(R f_b).d| <= e`` then gives ``|h(alpha)| <= e + 2 sin(phi/2) |d|`` with ``h(alpha)
-    = (Rot(g, alpha) R0 f_b).d = C + A cos(alpha) + B sin(alpha)`` (T moves d by at most that chord), and
-    ``|h'| <= M = hypot(A, B)``: an interval of alpha of half-width Delta is dropped where ``|h(alpha_k)| - M
-    Delta`` exceeds it for some pair. The kept intervals are halved while they are wider than phi and their
-    number stays within ``most``; each gives :func:`rotation_boxes` of its turn and ``phi + Delta``."""
-    f, n, phi = normal
-    f_b, d, e = (np.asarray(a, float).reshape(-1, k) for a, k in zip(pairs, (3, 3, 1)))
-    slack = e[:, 0] + 2.0 * np.sin(phi / 2.0) * np.linalg.norm(d, axis=1)
+    Delta``. ``(R f_b).d`` lies within ``2 sin(phi/2) |d|`` (the chord T moves d by) of ``h(alpha) = (Rot(g,
+    alpha) R0 f_b).d = C + A cos(alpha) + B sin(alpha)``, and ``|h'| <= M = hypot(A, B)``: an interval of alpha
+    of half-width Delta is dropped where ``|h(alpha_k)| - M Delta`` exceeds a pair's upper bound, or ``|h(alpha_k)|
+    + M Delta`` falls short of its lower bound, by more than that chord. The kept intervals are halved while they
+    are wider than phi and their number stays within ``most``; each gives :func:`rotation_boxes` of its turn and
+    ``phi + Delta``."""
+    f, n, phi, signs = normal
+    f_b, d, upper, lower = (np.asarray(a, float).reshape(-1, k) for a, k in zip(pairs, (3, 3, 1, 1)))
+    chord = 2.0 * np.sin(phi / 2.0) * np.linalg.norm(d, axis=1)
+    upper, lower = upper[:, 0] + chord, lower[:, 0] - chord
     rotations, widths = [], []
-    for g in (n, -n):
+    for g in (s * n for s in signs):
         R0 = np.column_stack([*perpendicular_basis(g), g]) @ np.column_stack([*perpendicular_basis(f), f]).T
         b = f_b @ R0.T
         along = b @ g
@@ -264,57 +283,63 @@ def tube_turns(normal, pairs, most=TUBE_BOXES):
         half = np.pi / FIRST_CELLS
         alpha = -np.pi + half * (2 * np.arange(FIRST_CELLS) + 1)
         while True:
-            h = C + np.cos(alpha)[:, None] * A + np.sin(alpha)[:, None] * B
-            alpha = alpha[np.all(np.abs(h) - M * half <= slack, axis=1)]
+            h = np.abs(C + np.cos(alpha)[:, None] * A + np.sin(alpha)[:, None] * B)
+            alpha = alpha[np.all((h - M * half <= upper) & (h + M * half >= lower), axis=1)]
             if not (half > phi and 0 < 2 * len(alpha) <= most):
                 break
             alpha, half = np.concatenate([alpha - half / 2.0, alpha + half / 2.0]), half / 2.0
         rotations.append(rotation_from_vector(alpha[:, None] * g) @ R0)
         widths.append(np.full(len(alpha), half + phi))
-    return rotation_boxes(np.concatenate(rotations), np.concatenate(widths))
+    return rotation_boxes(np.concatenate(rotations).reshape(-1, 3, 3), np.concatenate(widths))
 
 
-def plane_pairs(planes):
-    """Every pair of touches on one plane, from each plane's (fixture normal, touches (n, 3), reach (n,) mm), as
-    :func:`tube_turns` takes them: (fixture normals (m, 3), the touches' differences (m, 3), their reaches' sums
-    (m,))."""
-    pairs = [(f, points[j] - points[i], reach[i] + reach[j]) for f, points, reach in planes
+def tube_pairs(planes, lines):
+    """Every pair of touches on one plane and on one line or cylinder, as :func:`tube_turns` takes them, from each
+    plane's (fixture normal, touches (n, 3), reach (n,) mm) and each line's (fixture axis, touches (n, 3), how far
+    each may lie from the axis (n,) mm): on a plane ``|(R f).d| <= r_i + r_j`` (each touch within its reach of
+    it); on a line ``|(R a).d| >= sqrt(|d|^2 - (s_i + s_j)^2)`` (d's part across the axis is at most s_i + s_j)."""
+    pairs = [(f, points[j] - points[i], reach[i] + reach[j], 0.0) for f, points, reach, *_ in planes
              for i, j in itertools.combinations(range(len(points)), 2)]
-    return tuple(zip(*pairs)) if pairs else ((), (), ())
+    for a, points, across_mm in lines:
+        for i, j in itertools.combinations(range(len(points)), 2):
+            d = points[j] - points[i]
+            pairs.append((a, d, np.inf, np.sqrt(max(d @ d - (across_mm[i] + across_mm[j]) ** 2, 0.0))))
+    return tuple(zip(*pairs)) if pairs else ((), (), (), ())
 
 
-def first_turns(centres, normals, pairs_on_planes=((), (), ()), most=FIRST_TURN_PLANES):
+def first_turns(centres, normals, pairs=((), (), (), ()), most=FIRST_TURN_PLANES):
     """Rotation boxes (v (k, 3), half-widths (k,), rad) that hold a rotation vector of every turn that passes, as
     touched spheres' centres and planes' normals fix it whatever the pose, or None where they leave it open wider
     than a first-level cell.
 
     ``centres``: :class:`Tree`'s (fixture centre, box middle off the centroid, half-widths): a turn that puts
     each centre in its box moves each difference of two centres ``u`` to within ``|h_i + h_j|`` of its boxes'
-    middles' difference. ``normals``: (fixture normal, measured normal n*, phi) (:func:`measured_normal`): the
-    turn moves the fixture normal to within ``2 sin(phi/2)`` of +n* or -n*; each choice of signs gives its own
-    turns, and a choice is dropped where no turn can make it: two normals' angle is kept by a turn (within
-    ``phi_k + phi_l``), and three normals' triple product (within the sum of their chords). The bound
+    middles' difference. ``normals``: (fixture normal, measured normal n*, phi, signs) (:func:`measured_normal`,
+    :func:`normal_signs`): the turn moves the fixture normal to within ``2 sin(phi/2)`` of s n*, s one of its
+    signs; each choice of signs gives its own turns, and a choice is dropped where no turn can make it: two
+    normals' angle is kept by a turn (within ``phi_k + phi_l``), and three normals' triple product (within the
+    sum of their chords). The bound
     (:func:`turn_bound`) over every difference and normal, the centres' differences alone (every pair, each
     base's), and the normals alone; the boxes (:func:`rotation_boxes`) of every choice that a turn can make.
-    Where that bound is open, the boxes about the tightest normal that ``pairs_on_planes`` (:func:`plane_pairs`)
-    leave (:func:`tube_turns`), unless that normal's own phi is as wide as a first-level cell."""
+    Where that bound is open, the boxes about the tightest normal that ``pairs`` (:func:`tube_pairs`) leave
+    (:func:`tube_turns`), unless that normal's own phi is as wide as a first-level cell."""
     normals = sorted(normals, key=lambda n: n[2])[:most]
-    pairs = list(itertools.combinations(range(len(centres)), 2))
-    fixed = [centres[j][0] - centres[i][0] for i, j in pairs] + [f for f, _, _ in normals]
-    reach = [np.linalg.norm(centres[i][2] + centres[j][2]) for i, j in pairs] + \
-        [2.0 * np.sin(phi / 2.0) for _, _, phi in normals]
+    joined = list(itertools.combinations(range(len(centres)), 2))
+    fixed = [centres[j][0] - centres[i][0] for i, j in joined] + [f for f, *_ in normals]
+    reach = [np.linalg.norm(centres[i][2] + centres[j][2]) for i, j in joined] + \
+        [2.0 * np.sin(phi / 2.0) for _, _, phi, _ in normals]
     if not fixed:
         return None
     fixed, reach = np.array(fixed, float).reshape(-1, 3), np.array(reach, float)
-    planes = np.arange(len(pairs), len(fixed))
-    sets = [np.arange(len(fixed)), planes, np.arange(len(pairs))] + [
-        [k for k, (i, j) in enumerate(pairs) if base in (i, j)] for base in range(len(centres))]
+    planes = np.arange(len(joined), len(fixed))
+    sets = [np.arange(len(fixed)), planes, np.arange(len(joined))] + [
+        [k for k, (i, j) in enumerate(joined) if base in (i, j)] for base in range(len(centres))]
     sets = [chosen for chosen in sets if len(chosen) >= 2]
     f, e = fixed[planes], reach[planes]
-    differences = np.array([centres[j][1] - centres[i][1] for i, j in pairs], float).reshape(-1, 3)
+    differences = np.array([centres[j][1] - centres[i][1] for i, j in joined], float).reshape(-1, 3)
     boxes = []
-    for signs in itertools.product((1.0, -1.0), repeat=len(normals)):
-        g = np.array([s * n for s, (_, n, _) in zip(signs, normals)], float).reshape(-1, 3)
+    for signs in itertools.product(*[signs for *_, signs in normals]):
+        g = np.array([s * n for s, (_, n, _, _) in zip(signs, normals)], float).reshape(-1, 3)
         angle_kept = all(abs(np.arccos(np.clip(f[k] @ f[m], -1, 1)) - np.arccos(np.clip(g[k] @ g[m], -1, 1)))
                          <= normals[k][2] + normals[m][2] for k, m in itertools.combinations(range(len(f)), 2))
         triple_kept = all(abs(np.linalg.det(f[list(c)]) - np.linalg.det(g[list(c)])) <= e[list(c)].sum()
@@ -323,7 +348,7 @@ def first_turns(centres, normals, pairs_on_planes=((), (), ()), most=FIRST_TURN_
             continue  # no turn makes these signs
         R, theta = turn_bound(fixed, np.concatenate([differences, g]), reach, sets)
         if not theta < np.pi / FIRST_CELLS:
-            return tube_turns(normals[0], pairs_on_planes) if normals and normals[0][2] < np.pi / FIRST_CELLS else None
+            return tube_turns(normals[0], pairs) if normals and normals[0][2] < np.pi / FIRST_CELLS else None
         boxes.append(rotation_boxes(R, theta))
     if not boxes:
         return None
@@ -387,8 +412,8 @@ class Tree:
         # Each touch's patch box, grown by how far a touch that passes may lie off its patch: the patch's
         # tolerance and widening, its distance off the surface, a ball's radius.
         self.patch_low, self.patch_high = np.array([box[0] for box in boxes]), np.array([box[1] for box in boxes])
-        grow = patch_growth(self.root, self.dev, self.offset)
-        self.low, self.high = self.patch_low - grow[:, None], self.patch_high + grow[:, None]
+        self.grow = patch_growth(self.root, self.dev, self.offset)
+        self.low, self.high = self.patch_low - self.grow[:, None], self.patch_high + self.grow[:, None]
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
@@ -466,36 +491,60 @@ class Tree:
         self.relevant = np.ones(3, bool)
         if self.round.any() and self.aligned[self.round].all() and self.sensors is None:
             self.relevant[2] = False
-        # Each touch's patch box, its middle and its half-widths on the box's axes (an unbounded patch's box has no
-        # middle: 0 there, and infinite half-widths).
-        bounded = np.all(np.isfinite(self.low) & np.isfinite(self.high), axis=1)[:, None]
-        low, high = np.where(bounded, self.low, 0.0), np.where(bounded, self.high, 0.0)
-        self.patch_middle = 0.5 * (low + high)
-        self.patch_half = np.where(bounded, 0.5 * (high - low) @ np.abs(self.Q), np.inf)
+        # Each touch's patch box, its middle, widths and half-widths on the box's axes (an unbounded patch's box has
+        # no middle: 0 there, widths 0 and infinite half-widths).
+        self.bounded = bounded = np.all(np.isfinite(self.low) & np.isfinite(self.high), axis=1)
+        low, high = np.where(bounded[:, None], self.low, 0.0), np.where(bounded[:, None], self.high, 0.0)
+        self.patch_middle, self.patch_width = 0.5 * (low + high), high - low
+        self.patch_half = np.where(bounded[:, None], 0.5 * self.patch_width @ np.abs(self.Q), np.inf)
 
     @functools.cached_property
     def planes(self):
         """Each plane touched twice or more: (fixture normal, its touches in the measurement frame, their reach
-        in mm). (Only when asked: the unlabelled search builds many trees only to bound with them.)"""
+        in mm, their indices). (Only when asked: the unlabelled search builds many trees only to bound with
+        them.)"""
         out = []
         for k in range(len(self.problem.groups)):
             idx = np.flatnonzero(self.owner == k)
             if len(idx) >= 2 and np.all(self.core[idx] == "plane") and np.allclose(self.offset[idx], self.offset[idx[0]]):
-                out.append((self.direction[idx[0]], self.points[idx], self.root + self.dev[idx]))
+                out.append((self.direction[idx[0]], self.points[idx], self.root + self.dev[idx], idx))
+        return out
+
+    @functools.cached_property
+    def lines(self):
+        """Each line or cylinder touched twice or more: (fixture axis, its touches in the measurement frame, how
+        far each may lie from the axis in mm: its contact offset and reach)."""
+        out = []
+        for k in range(len(self.problem.groups)):
+            idx = np.flatnonzero(self.owner == k)
+            if len(idx) >= 2 and np.all(self.core[idx] == "line"):
+                out.append((self.direction[idx[0]], self.points[idx], self.offset[idx] + self.root + self.dev[idx]))
         return out
 
     @functools.cached_property
     def normals(self):
         """Each plane touched three times or more, its normal in the measurement frame where its touches put it,
-        whatever the pose, up to its sign: (fixture normal, measured normal, phi) (:func:`measured_normal`)."""
-        measured = [(f, measured_normal(points, reach)) for f, points, reach in self.planes if len(points) >= 3]
-        return [(f, *normal) for f, normal in measured if normal is not None]
+        whatever the pose, up to its sign, and the signs the other touches leave: (fixture normal, measured
+        normal, phi, signs) (:func:`measured_normal`, :func:`normal_signs`)."""
+        out = []
+        for f, points, reach, idx in self.planes:
+            normal = measured_normal(points, reach) if len(points) >= 3 else None
+            if normal is None:
+                continue
+            others = np.setdiff1d(np.arange(len(self.points)), idx)
+            # Each other touch's grown patch box along f (an unbounded one's: everywhere).
+            middle = self.patch_middle[others] @ f
+            half = np.where(self.bounded[others], 0.5 * self.patch_width[others] @ np.abs(f), np.inf)
+            heights = np.column_stack([middle - half, middle + half])
+            level = f @ self.flat_anchor[idx[0]] + np.array([-1.0, 1.0]) * reach.mean()
+            out.append((f, *normal, normal_signs((f, *normal), points, level, self.points[others], heights)))
+        return out
 
     def first_cells(self):
         """The first level's cells: the rotation boxes that touched spheres' centres and planes' normals, and
-        pairs of touches on planes, leave (:func:`first_turns`), else every rotation (:func:`first_cells`); y
-        unbounded."""
-        turn = first_turns(self.centres, self.normals, plane_pairs(self.planes))
+        pairs of touches on planes and lines, leave (:func:`first_turns`), else every rotation
+        (:func:`first_cells`); y unbounded."""
+        turn = first_turns(self.centres, self.normals, tube_pairs(self.planes, self.lines))
         if turn is None:
             return first_cells()
         v, w = turn

@@ -160,3 +160,25 @@ def test_ball_tip_rows_are_the_distance_less_both_radii():
         group = point_touches(feature, centres, np.arange(len(centres)), ball_mm)
         rows, _ = residuals_and_jacobian(group.ctype, group.sensor, group.fixture, np.eye(3), np.zeros(3), group.rho)
         assert np.allclose(rows[:, 0], expected[feature.kind], atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["cube", "inclined-plane-cylinder", "quarter-sphere", "sphere-plate", "v-block"])
+def test_a_patch_s_box_holds_every_point_of_the_patch(name):
+    """Every feature of each template (and of :func:`_examples`): 50,000 points drawn in the patch's box grown by
+    20 mm, moved onto the feature (``closest_point``) and kept where its patch holds them (``contains``), a sampler
+    other than the grid the box comes from, lie in :func:`.patches.patch_box`: the search's bounds and first cells
+    take a touch that passes to lie near it (docs/registration.md, the complete search, 2)."""
+    from fixturecad.build import features_document
+    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.patches import patch_box
+    from fixturecad.templates import make
+
+    rng = np.random.default_rng(RNG_SEED)
+    for feature in list(features_from_json(features_document(make(name))).values()) + _examples():
+        low, high = patch_box(feature)
+        if not np.all(np.isfinite(low) & np.isfinite(high)):
+            continue
+        points = feature.closest_point(rng.uniform(low - 20.0, high + 20.0, (50000, 3)))
+        points = points[feature.contains(points, 0.0)]
+        assert len(points) > 0
+        assert np.all((points >= low - 1e-9) & (points <= high + 1e-9)), feature.id

@@ -2,6 +2,8 @@
 against poses sampled where it claims none passes; tests/test_solution_search.py checks the whole search
 against an independent brute force."""
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy.sparse import csr_matrix
@@ -9,13 +11,14 @@ from scipy.sparse.csgraph import connected_components
 
 from fixturecad.build import features_document
 from fixturecad.registration.deviations import largest_row_variance, tolerance_from_document
+from fixturecad.registration.elements import perpendicular_basis
 from fixturecad.registration.features import Cylinder, Extent, features_from_json
 from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, plane_pairs, rotation_boxes, row_span, search,
-                                            stand_in_tree, threshold_mm2)
+                                            measured_normal, rotation_boxes, row_span, search,
+                                            normal_signs, stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -309,7 +312,7 @@ def test_the_normals_turns_hold_every_turn_that_keeps_each_plane_s_touches_on_it
             points = (local + rng.uniform(-1, 1, (n, 1)) * reach[:, None] * f) @ R.T + t
             normal = measured_normal(points, reach)
             if normal is not None:
-                normals.append((f, *normal))
+                normals.append((f, *normal, (1.0, -1.0)))
                 groups.append((f, points, reach))
         turn = first_turns([], normals)
         if turn is None:
@@ -324,31 +327,64 @@ def test_the_normals_turns_hold_every_turn_that_keeps_each_plane_s_touches_on_it
     assert boxed >= (150 if count == 3 else 100)
 
 
-@pytest.mark.parametrize("second", [0, 2, 3], ids=["one plane", "and a pair", "and three touches"])
+def keep_lines(turns, lines):
+    """Whether each turn (K, 3, 3) keeps each pair of each line's touches within their reach across one line with
+    its turned fixture axis: the pair's difference's part across it at most their reaches' sum (``lines``: (fixture
+    axis, touches (n, 3), how far each may lie from the axis (n,)))."""
+    fits = np.ones(len(turns), bool)
+    for a, points, across_mm in lines:
+        u = turns @ a  # (K, 3)
+        for i, j in itertools.combinations(range(len(points)), 2):
+            d = points[j] - points[i]
+            fits &= np.linalg.norm(d - (u @ d)[:, None] * u, axis=1) <= across_mm[i] + across_mm[j]
+    return fits
+
+
+def _plane_layout(rng, n, R, t, level=0.0):
+    """A plane ``f.x = level`` (mm), f at a random angle, touched n times, each touch within 0.01-0.3 mm of it, at
+    the pose (R, t): (fixture normal, touches in the measurement frame (n, 3), reach (n,))."""
+    f = rng.normal(size=3)
+    f /= np.linalg.norm(f)
+    u, w = np.linalg.svd(f[None])[2][1:]
+    local = rng.uniform(-40, 40, (n, 1)) * u + rng.uniform(-40, 40, (n, 1)) * w + level * f
+    reach = rng.uniform(0.01, 0.3, n)
+    return f, (local + rng.uniform(-1, 1, (n, 1)) * reach[:, None] * f) @ R.T + t, reach
+
+
+@pytest.mark.parametrize("second", ["none", "pair", "three", "line"],
+                         ids=["one plane", "and a pair", "and three touches", "and a cylinder"])
 def test_the_tube_about_one_normal_holds_every_turn_that_keeps_each_plane_s_touches_on_it(second):
     """200 layouts of a plane touched three to five times and, at a random angle, none or a second plane touched
     two or three times (its own normal left out, so that the turn about the first is bounded by its pairs of
-    touches alone), each touch within 0.01-0.3 mm of its plane at a random pose: the boxes about the first
-    plane's normal (:func:`first_turns`, :func:`tube_turns`) hold the rotation vector of every turn, of 20,000
-    drawn about the boxes and the truth, under which each plane's touches still fit within their reach of it.
-    It fails when an interval's Lipschitz term, the normal's sign -n* or the chord the normal's reach moves a pair
-    by is left out, or the boxes are a quarter as wide."""
+    touches alone), or a cylinder of radius 5-30 mm touched three to six times along 80 mm of its axis, each touch
+    within 0.01-0.3 mm of its surface at a random pose: the boxes about the first plane's normal
+    (:func:`first_turns`, :func:`tube_turns`) hold the rotation vector of every turn, of 20,000 drawn about the
+    boxes and the truth, under which each plane's touches still fit within their reach of it and each pair of the
+    cylinder's fit within their reach across its axis. It fails when an interval's Lipschitz term, the normal's
+    sign -n*, the chord the normal's reach moves a pair by (on a plane or a cylinder) or a cylinder pair's reach is
+    left out, or the boxes are a quarter as wide."""
     rng = np.random.default_rng(15)
     counts = []
     for _ in range(200):
         R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
-        groups = []
-        for n in (rng.integers(3, 6), second):
-            f = rng.normal(size=3)
-            f /= np.linalg.norm(f)
-            u, w = np.linalg.svd(f[None])[2][1:]
-            local = rng.uniform(-40, 40, (n, 1)) * u + rng.uniform(-40, 40, (n, 1)) * w + rng.uniform(-20, 20) * f
+        groups = [_plane_layout(rng, rng.integers(3, 6), R, t, rng.uniform(-20, 20))]
+        if second in ("pair", "three"):
+            groups.append(_plane_layout(rng, 2 if second == "pair" else 3, R, t, rng.uniform(-20, 20)))
+        lines = []
+        if second == "line":
+            a = rng.normal(size=3)
+            a /= np.linalg.norm(a)
+            e1, e2 = perpendicular_basis(a)
+            n, radius = rng.integers(3, 7), rng.uniform(5, 30)
             reach = rng.uniform(0.01, 0.3, n)
-            groups.append((f, (local + rng.uniform(-1, 1, (n, 1)) * reach[:, None] * f) @ R.T + t, reach))
+            angle, along = rng.uniform(0, 2 * np.pi, n), rng.uniform(-40, 40, n)
+            local = rng.uniform(-30, 30, 3) + along[:, None] * a + (radius + rng.uniform(-1, 1, n) * reach)[:, None] * (
+                np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2)
+            lines.append((a, local @ R.T + t, radius + reach))
         normal = measured_normal(groups[0][1], groups[0][2])
         if normal is None:
             continue
-        turn = first_turns([], [(groups[0][0], *normal)], plane_pairs(groups))
+        turn = first_turns([], [(groups[0][0], *normal, (1.0, -1.0))], tube_pairs(groups, lines))
         if turn is None:
             continue  # (the normal is as loose as a first-level cell)
         v0, w0 = turn
@@ -358,11 +394,64 @@ def test_the_tube_about_one_normal_holds_every_turn_that_keeps_each_plane_s_touc
         step = rng.normal(size=(20000, 3))
         step *= (radii[pick] * rng.uniform(0, 1, 20000) ** (1 / 3) / np.linalg.norm(step, axis=1))[:, None]
         turns = rotation_from_vector(centres[pick] + step)
-        assert np.all(in_boxes(vector_from_rotation(turns[keep_planes(turns, groups[:1 + bool(second)])]), v0, w0))
+        kept = keep_planes(turns, groups) & keep_lines(turns, lines)
+        assert np.all(in_boxes(vector_from_rotation(turns[kept]), v0, w0))
     assert len(counts) >= 150
     # Pairs on a second plane pin the turn about the first normal to a few narrow intervals; without them the
-    # whole circle is kept, in boxes about as wide as phi.
-    assert np.median(counts) <= 32 if second else np.median(counts) >= TUBE_BOXES / 2
+    # whole circle is kept, in boxes about as wide as phi; a cylinder's pairs longer than its diameter cut it.
+    if second in ("pair", "three"):
+        assert np.median(counts) <= 32
+    elif second == "none":
+        assert np.median(counts) >= TUBE_BOXES / 2
+    else:
+        assert np.median(counts) < 0.9 * TUBE_BOXES
+
+
+def test_a_plane_s_measured_normal_keeps_every_sign_a_turn_that_passes_gives_it():
+    """200 layouts of a plane touched three to five times, each within 0.01-0.3 mm of it, and two to four other
+    touches whose heights along its fixture normal lie 0-0.05 mm inside ranges (every other layout, ranges as wide
+    on both sides of the plane), at a random pose: of 20,000 turns drawn about the truth and about the truth turned
+    over (a half turn about an axis across the normal), every one under which some translation puts each plane
+    touch within its reach of the plane and each other touch within its range has its sign (of ``(R f).n*``)
+    among :func:`normal_signs`'s. It fails when the chord or the plane touches' mean reach is left out; where the
+    ranges lie on one side of the plane, the other sign is dropped in most layouts."""
+    rng = np.random.default_rng(18)
+    one_sided, dropped = 0, 0
+    for k in range(200):
+        R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
+        c = rng.uniform(-20, 20)
+        f, plane, reach = _plane_layout(rng, rng.integers(3, 6), R, t, c)
+        normal = measured_normal(plane, reach)
+        if normal is None:
+            continue
+        m = rng.integers(2, 5)
+        # Below the plane, the first near the plane touches' middle (where the normal's chord is short).
+        local = rng.uniform(-40, 40, (m, 3))
+        local[0] = (plane - t).mean(axis=0) @ R + rng.uniform(-1, 1, 3)
+        local += (c - np.r_[rng.uniform(0.2, 2), rng.uniform(2, 40, m - 1)] - local @ f)[:, None] * f
+        height = local @ f
+        low, high = height - rng.uniform(0, 0.05, m), height + rng.uniform(0, 0.05, m)
+        if k % 2:
+            low, high = np.minimum(low, 2 * c - high), np.maximum(high, 2 * c - low)
+        else:
+            one_sided += 1
+        others = local @ R.T + t
+        level = (c - reach.mean(), c + reach.mean())
+        signs = normal_signs((f, *normal), plane, level, others, np.column_stack([low, high]))
+        dropped += len(signs) < 2 and not k % 2
+        across = np.cross(R @ f, rng.normal(size=3))
+        over = rotation_from_vector(np.pi * across / np.linalg.norm(across)) @ R
+        centres = vector_from_rotation(np.stack([R, over]))
+        step = rng.normal(size=(20000, 3))
+        step *= (3 * normal[1] * rng.uniform(0, 1, 20000) ** (1 / 3) / np.linalg.norm(step, axis=1))[:, None]
+        turns = rotation_from_vector(centres[rng.integers(2, size=20000)] + step)
+        u = turns @ f  # (K, 3): each turn's normal; tau = u.t puts a touch p at height u.p - tau
+        up, uo = u @ plane.T, u @ others.T
+        tau_low = np.maximum(np.max(up - c - reach, axis=1), np.max(uo - high, axis=1))
+        tau_high = np.minimum(np.min(up - c + reach, axis=1), np.min(uo - low, axis=1))
+        passes = tau_low <= tau_high
+        assert np.all(np.isin(np.sign(u[passes] @ normal[0]), signs))
+    assert dropped >= 0.8 * one_sided
 
 
 def test_rotation_boxes_hold_every_turn_within_theta_even_past_a_half_turn():
