@@ -180,13 +180,28 @@ def measured_normal(points, reach):
 
     Summed over the k pairs, ``n^T P n <= k`` with ``P = sum d d^T / (r_i + r_j)^2`` (d = p_j - p_i); with n* the
     eigenvector of P's least eigenvalue, ``n = cos(phi) n* + sin(phi) m`` has ``n^T P n >= sin^2(phi)
-    lambda_2``, so ``sin^2(phi) <= k / lambda_2``."""
+    lambda_2``, so ``sin^2(phi) <= k / lambda_2``. Tighter, pair by pair: such an n on n*'s side is ``(n* + u) /
+    |n* + u|`` with u across n* and ``|n* + u| = 1 / (n.n*) <= 1 / cos(phi)``, so every pair's ``|(n* +
+    u).d| <= (r_i + r_j) / cos(phi)``: u lies in a polygon (the pairs' slabs), within its farthest vertex's
+    ``|u| = tan`` of n's angle from n*."""
     i, j = np.triu_indices(len(points), 1)
     d = (points[j] - points[i]) / (reach[i] + reach[j])[:, None]
     lam, vec = np.linalg.eigh(d.T @ d)
     if not lam[1] > len(i):
         return None
-    return vec[:, 0], float(np.arcsin(np.sqrt(len(i) / lam[1])))
+    n, phi = vec[:, 0], float(np.arcsin(np.sqrt(len(i) / lam[1])))
+    # The slabs' edges a.u = b (both sides of each pair's), their corners where two meet, the corners in every slab.
+    across = d @ np.column_stack(perpendicular_basis(n))
+    a = np.concatenate([across, across])
+    b = np.concatenate([np.ones(len(d)), -np.ones(len(d))]) / np.cos(phi) - np.concatenate([d @ n, d @ n])
+    k, m = np.triu_indices(len(a), 1)
+    det = a[k, 0] * a[m, 1] - a[k, 1] * a[m, 0]
+    k, m, det = k[np.abs(det) > 1e-12], m[np.abs(det) > 1e-12], det[np.abs(det) > 1e-12]
+    corners = np.column_stack([b[k] * a[m, 1] - b[m] * a[k, 1], a[k, 0] * b[m] - a[m, 0] * b[k]]) / det[:, None]
+    inside = np.all(np.abs(d @ n + corners @ across.T) <= (1.0 + 1e-7) / np.cos(phi), axis=1)
+    if inside.any():
+        phi = min(phi, float(np.arctan(np.linalg.norm(corners[inside], axis=1).max())))
+    return n, phi
 
 
 def turn_bound(fixed, measured, reach, sets):
@@ -280,11 +295,14 @@ def tube_turns(normal, pairs, most=TUBE_BOXES):
         along = b @ g
         C, A, B = along * (d @ g), np.sum(d * (b - along[:, None] * g), axis=1), np.sum(d * cross(g, b), axis=1)
         M = np.hypot(A, B)
+        # |h| lies in [|C| - M, |C| + M]: a pair within its bounds there drops no interval.
+        cuts = (np.abs(C) + M > upper) | (np.abs(C) - M < lower)
+        C, A, B, M, high, low = C[cuts], A[cuts], B[cuts], M[cuts], upper[cuts], lower[cuts]
         half = np.pi / FIRST_CELLS
         alpha = -np.pi + half * (2 * np.arange(FIRST_CELLS) + 1)
         while True:
             h = np.abs(C + np.cos(alpha)[:, None] * A + np.sin(alpha)[:, None] * B)
-            alpha = alpha[np.all((h - M * half <= upper) & (h + M * half >= lower), axis=1)]
+            alpha = alpha[np.all((h - M * half <= high) & (h + M * half >= low), axis=1)]
             if not (half > phi and 0 < 2 * len(alpha) <= most):
                 break
             alpha, half = np.concatenate([alpha - half / 2.0, alpha + half / 2.0]), half / 2.0

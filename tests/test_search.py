@@ -407,6 +407,45 @@ def test_the_tube_about_one_normal_holds_every_turn_that_keeps_each_plane_s_touc
         assert np.median(counts) < 0.9 * TUBE_BOXES
 
 
+def test_a_plane_s_measured_normal_holds_every_normal_that_fits_its_touches():
+    """200 layouts of a plane touched three to eight times over 10-40 mm, each touch within 0.01-3 mm of it: of
+    20,000 unit normals drawn within the eigenvalue bound's angle (times 1.2) of n* (half of them near its edge),
+    every one under which each pair of touches fits within their reaches (``|n.d| <= r_i + r_j``) lies within
+    :func:`measured_normal`'s phi of n*, and in most layouts one lies beyond 0.9 phi (phi is about the farthest
+    such normal, tighter than the eigenvalue bound). It fails when the slabs' 1/cos(phi) is left out, or phi is
+    taken 3 % narrower."""
+    rng = np.random.default_rng(19)
+    near, checked = 0, 0
+    for _ in range(200):
+        count, size = rng.integers(3, 9), rng.uniform(10, 40)
+        f = rng.normal(size=3)
+        f /= np.linalg.norm(f)
+        u, w = np.linalg.svd(f[None])[2][1:]
+        reach = np.exp(rng.uniform(np.log(0.01), np.log(3.0), count))
+        points = rng.uniform(-size, size, (count, 1)) * u + rng.uniform(-size, size, (count, 1)) * w + \
+            rng.uniform(-1, 1, (count, 1)) * reach[:, None] * f
+        normal = measured_normal(points, reach)
+        if normal is None:
+            continue
+        n, phi = normal
+        i, j = np.triu_indices(count, 1)
+        d, e = points[j] - points[i], reach[i] + reach[j]
+        lam = np.linalg.eigvalsh((d / e[:, None]).T @ (d / e[:, None]))
+        wide = np.arcsin(min(1.0, np.sqrt(len(i) / lam[1])))
+        assert phi <= wide + 1e-12
+        m = rng.normal(size=(20000, 3))
+        m -= (m @ n)[:, None] * n
+        m /= np.linalg.norm(m, axis=1, keepdims=True)
+        angle = 1.2 * wide * np.where(np.arange(20000) < 10000, rng.uniform(0, 1, 20000),
+                                      1.0 - 0.3 * rng.uniform(0, 1, 20000) ** 2)
+        trial = np.cos(angle)[:, None] * n + np.sin(angle)[:, None] * m
+        fits = np.all(np.abs(trial @ d.T) <= e, axis=1)
+        assert np.all(angle[fits] <= phi + 1e-12)
+        checked += 1
+        near += angle[fits].max(initial=0.0) > 0.9 * phi
+    assert checked >= 150 and near >= 0.8 * checked
+
+
 def test_a_plane_s_measured_normal_keeps_every_sign_a_turn_that_passes_gives_it():
     """200 layouts of a plane touched three to five times, each within 0.01-0.3 mm of it, and two to four other
     touches whose heights along its fixture normal lie 0-0.05 mm inside ranges (every other layout, ranges as wide
