@@ -55,16 +55,18 @@ class Problem:
 
     def sensor_rows(self, rotation, translation, grow=0.0):
         """Rows and Jacobian whitened for the sensor noise only (the fixture's deviations left in)."""
-        values, jacobians = [], []
-        for g in self.batches:
-            fixture, rho = _grown(g, grow)
-            v, J = residuals_and_jacobian(g.ctype, g.sensor, fixture, rotation, translation, rho)
-            g.rows = v.shape[1]
-            if not is_point_sensor(g.sensor):
-                v, J = whitened(v, J, g.centre, self.lever)
-            values.append(v.reshape(-1))
-            jacobians.append(J.reshape(-1, 6))
-        return np.concatenate(values), np.concatenate(jacobians)
+        rows = [self._rows(g, rotation, translation, grow) for g in self.batches]
+        return np.concatenate([v for v, _ in rows]), np.concatenate([J for _, J in rows])
+
+    def _rows(self, g, rotation, translation, grow=0.0):
+        """One batch's rows (n,) and Jacobian (n, 6) whitened for the sensor noise; ``grow``: its sphere or
+        cylinder grown by this many mm."""
+        fixture, rho = _grown(g, grow)
+        v, J = residuals_and_jacobian(g.ctype, g.sensor, fixture, rotation, translation, rho)
+        g.rows = v.shape[1]
+        if not is_point_sensor(g.sensor):
+            v, J = whitened(v, J, g.centre, self.lever)
+        return v.reshape(-1), J.reshape(-1, 6)
 
     def evaluate(self, rotation, translation):
         r, J = self.sensor_rows(rotation, translation)
@@ -81,21 +83,18 @@ class Problem:
     def radius_derivative(self, rotation, translation):
         """How each (whitened) row changes as its feature's radius grows, shape (m,) per mm.
 
-        Kept while the pose stays within ``RADIUS_DERIVATIVE_REACH`` (rad, mm):
-        it hardly changes with the pose, and it costs two evaluations (a central difference), but for point
-        touches alone, whose rows fall by exactly a sphere's or cylinder's growth.
+        Exact where :func:`radius_change` knows it; elsewhere a central difference of the batch's rows, kept
+        while the pose stays within ``RADIUS_DERIVATIVE_REACH`` (rad, mm): it hardly changes with the pose, and
+        it costs two evaluations of the batch.
         """
         if self._radius_derivative is not None:
             R0, t0, value = self._radius_derivative
             if np.abs(rotation - R0).max() < RADIUS_DERIVATIVE_REACH and np.abs(translation - t0).max() < RADIUS_DERIVATIVE_REACH:
                 return value
-        if all(g.ctype.sensor == "P" for g in self.batches):
-            # A point touch's row is its distance from the surface: a grown sphere or cylinder takes exactly that off.
-            self._count_rows()
-            value = np.concatenate([np.full(g.count * g.rows, -1.0 if "r" in g.fixture.geometry else 0.0)
-                                    for g in self.batches])
-        else:
-            value = _radius_difference(lambda grow: self.sensor_rows(rotation, translation, grow)[0])
+        self._count_rows()
+        value = np.concatenate([np.zeros(0)] + [
+            np.full(g.count * g.rows, radius_change(g)) if radius_change(g) is not None else
+            _radius_difference(lambda grow: self._rows(g, rotation, translation, grow)[0]) for g in self.batches])
         self._radius_derivative = (rotation, translation, value)
         return value
 
@@ -147,7 +146,10 @@ class Problem:
             return r, J
 
         def radius_rows():
-            drho = _radius_difference(lambda grow: self._batch_rows(rotations, translations, grow)[0])
+            drho = np.concatenate([
+                np.full((len(rotations), g.count * rows), radius_change(g)) if radius_change(g) is not None else
+                _radius_difference(lambda grow: self._group_rows(g, rotations, translations, grow)[0].reshape(
+                    len(rotations), -1)) for g, rows in zip(self.groups, self._batch_layout[2])], axis=1)
             return drho if without is None else drho * kept
 
         Jd = mode_rows(self.tolerance, feature, J, lambda fid: self.tolerance.modes[fid].twists, radius_rows)
@@ -158,32 +160,36 @@ class Problem:
         """:meth:`evaluate_batch`'s rows whitened for the sensor noise only, and each row's feature id and touch
         index (m,); ``grow``: every sphere and cylinder grown by this many mm."""
         K = len(rotations)
-        values, jacobians, rows = [], [], []
-        for g in self.groups:
-            geometry = {}
-            for key, value in g.sensor.geometry.items():
-                value = np.broadcast_to(value, (g.count,) + np.shape(value)[1:] if np.ndim(value) else (g.count,))
-                if key in POINT_KEYS:
-                    moved = (value[None] - translations[:, None]) @ rotations
-                elif key in DIRECTION_KEYS:
-                    moved = value[None] @ rotations
-                else:
-                    moved = np.broadcast_to(value, (K,) + value.shape)
-                geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
-            sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
-            fixture, rho = _grown(g, grow)
-            v, J = residuals_and_jacobian(g.ctype, sensor, fixture, np.eye(3), np.zeros(3), np.tile(rho, K))
-            if not is_point_sensor(g.sensor):
-                centres = (g.centre[None] - translations[:, None]) @ rotations
-                v, J = whitened(v, J, centres.reshape(-1, 3), self.lever)
-            values.append(v.reshape(K, -1))
-            jacobians.append(J.reshape(K, -1, 6))
-            rows.append(v.shape[1])  # (a touch's)
-        if self._batch_layout is None:  # each row's feature id and touch index: the same at every pose
+        parts = [self._group_rows(g, rotations, translations, grow) for g in self.groups]
+        rows = [v.shape[1] for v, _ in parts]  # (a touch's)
+        if self._batch_layout is None:  # each row's feature id, touch index and rows a touch: the same at every pose
             self._batch_layout = (
                 np.array([g.feature.id for g, k in zip(self.groups, rows) for _ in range(g.count * k)], dtype=object),
-                np.concatenate([np.repeat(g.index, k) for g, k in zip(self.groups, rows)]))
-        return (np.concatenate(values, axis=1), np.concatenate(jacobians, axis=1), *self._batch_layout)
+                np.concatenate([np.repeat(g.index, k) for g, k in zip(self.groups, rows)]), rows)
+        return (np.concatenate([v.reshape(K, -1) for v, _ in parts], axis=1),
+                np.concatenate([J.reshape(K, -1, 6) for _, J in parts], axis=1), *self._batch_layout[:2])
+
+    def _group_rows(self, g, rotations, translations, grow=0.0):
+        """One group's rows (K count, k) and Jacobian (K count, k, 6) at K poses, whitened for the sensor noise:
+        its sensors mapped into the fixture frame, stacked into one call of the contact model at the identity."""
+        K = len(rotations)
+        geometry = {}
+        for key, value in g.sensor.geometry.items():
+            value = np.broadcast_to(value, (g.count,) + np.shape(value)[1:] if np.ndim(value) else (g.count,))
+            if key in POINT_KEYS:
+                moved = (value[None] - translations[:, None]) @ rotations
+            elif key in DIRECTION_KEYS:
+                moved = value[None] @ rotations
+            else:
+                moved = np.broadcast_to(value, (K,) + value.shape)
+            geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
+        sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
+        fixture, rho = _grown(g, grow)
+        v, J = residuals_and_jacobian(g.ctype, sensor, fixture, np.eye(3), np.zeros(3), np.tile(rho, K))
+        if not is_point_sensor(g.sensor):
+            centres = (g.centre[None] - translations[:, None]) @ rotations
+            v, J = whitened(v, J, centres.reshape(-1, 3), self.lever)
+        return v, J
 
     def without(self, touch):
         """The plan with one touch (by caller index) left out."""
@@ -205,6 +211,16 @@ class Problem:
                 pts = np.concatenate(pts)
                 self._scale = max(float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1)))), 1.0)
         return self._scale
+
+
+def radius_change(group):
+    """How each row of a group changes as its feature's radius grows, per mm, where that is known exactly: 0 on a
+    feature with no radius (its rows do not hold one), -1 for point touches on a sphere or cylinder (their row is
+    their distance from the surface, which the growth takes off); None for a sensor on one (a central
+    difference)."""
+    if "r" not in group.fixture.geometry:
+        return 0.0
+    return -1.0 if group.ctype.sensor == "P" else None
 
 
 def _radius_difference(rows_at):

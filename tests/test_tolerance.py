@@ -242,21 +242,56 @@ def test_rows_whitened_for_the_print_as_the_dense_covariance_says(name):
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_point_touches_radius_derivative_is_the_central_difference(name):
-    """Point touches alone take their rows' change with a feature's radius as -1 on a sphere or cylinder and 0 on
-    a plane: the same, to 1e-9, as the central difference of the rows with the radius grown and shrunk, which
-    every other touch takes; at five poses of each template's point touches."""
+def test_the_radius_derivative_is_the_central_difference(name):
+    """Rows take their change with a feature's radius as -1 for point touches on a sphere or cylinder and 0 on a
+    feature with none (:func:`.problem.radius_change`): the same, to 1e-9, as the central difference of the rows
+    with the radius grown and shrunk, which sensors on a sphere or cylinder take; at five poses of each template's
+    default plan, its sensors too, and of its point touches alone."""
     from fixturecad.registration.problem import Problem, _radius_difference
+    from fixturecad.registration.synthetic import plan_touches
     from fixturecad.registration.touches import build_groups
 
     template, features = nominal(name)
-    touches = point_touches_of(template)
     rng = np.random.default_rng(5)
     for _ in range(5):
-        problem = Problem(build_groups(features, touches), 0.005)  # (a fresh one: it keeps a derivative per pose)
         R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
-        central = _radius_difference(lambda grow: problem.sensor_rows(R, t, grow)[0])
-        assert np.allclose(problem.radius_derivative(R, t), central, atol=1e-9)
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = R, t
+        touches, contacts = plan_touches(template.touch_plans()["default"].touches, pose)
+        for groups in (build_groups(features, point_touches_of(template)), build_groups(features, touches,
+                                                                                          contacts=contacts)):
+            problem = Problem(groups, 0.005)  # (a fresh one: it keeps a derivative per pose)
+            central = _radius_difference(lambda grow: problem.sensor_rows(R, t, grow)[0])
+            assert np.allclose(problem.radius_derivative(R, t), central, atol=1e-9)
+
+
+@pytest.mark.parametrize("row", [29, 33, 35], ids=["{G3}{R-R-C}{S-T2}", "{R}{C-R-C}", "{R}{G3-R}"])
+def test_sensors_on_a_sphere_or_cylinder_take_the_central_difference(row):
+    """Designs whose plans put line and point-line sensors on cylinders (tests/search_cases.py): their rows'
+    change with the radius is the central difference (whitened, not -1), at five poses about the truth of one
+    layout each (:meth:`.Problem.radius_derivative`); and on the printed part the batch
+    (:meth:`.Problem.evaluate_batch`, which takes the same derivatives group by group) gives each pose's cost as
+    one pose at a time does (a ball's three rows come in either frame)."""
+    from search_cases import VARIANTS, layout
+
+    from fixturecad.registration.pose import rotation_from_vector
+    from fixturecad.registration.problem import Problem, _radius_difference, radius_change
+    from fixturecad.registration.touches import build_groups
+
+    lay = layout(*VARIANTS[row], 1000)
+    groups = build_groups(lay.features, lay.touches, contacts=lay.contacts)
+    assert any(radius_change(g) is None for g in Problem(groups, 0.005).batches)
+    rng = np.random.default_rng(6)
+    R = rotation_from_vector(rng.normal(0, 0.01, (5, 3))) @ lay.truth[:3, :3]
+    t = lay.truth[:3, 3] + rng.uniform(-1, 1, (5, 3))
+    printed = Problem(groups, 0.005, tolerance=lay.tolerance)
+    batched = printed.evaluate_batch(R, t)[0]
+    for k in range(5):
+        problem = Problem(groups, 0.005)  # (a fresh one: it keeps a derivative per pose)
+        central = _radius_difference(lambda grow: problem.sensor_rows(R[k], t[k], grow)[0])
+        assert np.allclose(problem.radius_derivative(R[k], t[k]), central, atol=1e-9)
+        one = Problem(groups, 0.005, tolerance=lay.tolerance).evaluate(R[k], t[k])[0]
+        assert np.isclose(batched[k] @ batched[k], one @ one, rtol=1e-9)
 
 
 def test_ten_thousand_touches_on_a_printed_part_take_memory_linear_in_rows():
