@@ -224,14 +224,16 @@ def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled
     """
     record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, True, unlabelled)
     if sampler.tolerance is not None:
-        alone = _registration(routine, sampler, rng, noise, sigma, True, lever, zone, False, unlabelled)
-        part = _registration(routine, sampler, rng, 0.0, sigma, True, lever, zone, True, unlabelled)
+        alone = _registration(routine, sampler, rng, noise, sigma, True, lever, zone, False, unlabelled, False)
+        part = _registration(routine, sampler, rng, 0.0, sigma, True, lever, zone, True, unlabelled, False)
         record.update({f"noise_only_{key}": alone[key] for key in ("translation_error_mm", "rotation_error_deg")})
         record.update({f"fixture_only_{key}": part[key] for key in ("translation_error_mm", "rotation_error_deg")})
     return record
 
 
-def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed, unlabelled):
+def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed, unlabelled, bounds=True):
+    """One registration of fresh touches: its status, errors and time, and (``bounds``) the Cramer-Rao bounds of
+    its touches, on the part and on a perfect one."""
     import time
 
     import numpy as np
@@ -261,24 +263,24 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
     # An inconsistent result with no explanation gives no pose: no error to count.
     err_t, err_r = (np.nan, np.nan) if result["pose"] is None else pose_errors(np.array(result["pose"]), truth)
     # The bound of the noise actually drawn (the routine's sigma also allows for the STL's chords).
-    noise_model = noise if noise > 0 else sigma
-    groups = build_groups(sampler.features, touches, sampler.ball_radius_mm, contacts)
-    bound_t, bound_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever, tolerance), truth, noise_model))
-    noise_t, noise_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever), truth, noise_model))
     # Unlabelled: each touch's feature against the one the answer put it on (None: none, or left out).
     own = [fid for fid, points in touches.items() for _ in range(len(points))]
     put = {a["touch"] - len(contacts): a["feature"] for a in result.get("assignment") or []}
-    return {
+    record = {
         "status": result["status"],
         **({"assigned": [[fid, put.get(k)] for k, fid in enumerate(own)]} if unlabelled else {}),
         "translation_error_mm": err_t,
         "rotation_error_deg": float(np.degrees(err_r)),
-        "crb_translation_mm": bound_t,
-        "crb_rotation_deg": bound_r,
-        "noise_crb_translation_mm": noise_t,
-        "noise_crb_rotation_deg": noise_r,
         "time_s": elapsed,
     }
+    if bounds:
+        noise_model = noise if noise > 0 else sigma
+        groups = build_groups(sampler.features, touches, sampler.ball_radius_mm, contacts)
+        bound_t, bound_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever, tolerance), truth, noise_model))
+        noise_t, noise_r = sigmas(cramer_rao_bound(Problem(groups, noise_model, lever), truth, noise_model))
+        record.update(crb_translation_mm=bound_t, crb_rotation_deg=bound_r, noise_crb_translation_mm=noise_t,
+                      noise_crb_rotation_deg=noise_r)
+    return record
 
 
 def _check_tolerance(zone):
