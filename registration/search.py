@@ -336,9 +336,9 @@ def first_turns(centres, normals, pairs=((), (), (), ()), most=FIRST_TURN_PLANES
     :func:`normal_signs`): the turn moves the fixture normal to within ``2 sin(phi/2)`` of s n*, s one of its
     signs; each choice of signs gives its own turns, and a choice is dropped where no turn can make it: two
     normals' angle is kept by a turn (within ``phi_k + phi_l``), and three normals' triple product (within the
-    sum of their chords). The bound
-    (:func:`turn_bound`) over every difference and normal, the centres' differences alone (every pair, each
-    base's), and the normals alone; the boxes (:func:`rotation_boxes`) of every choice that a turn can make.
+    sum of their chords). The bound (:func:`turn_bound`) over every difference and normal, the centres'
+    differences alone (every pair, each base's), and the normals alone; the boxes (:func:`rotation_boxes`) of
+    every choice that a turn can make.
     Where that bound is open, the boxes about the tightest normal that ``pairs`` (:func:`tube_pairs`) leave
     (:func:`tube_turns`), unless that normal's own phi is as wide as a first-level cell."""
     normals = sorted(normals, key=lambda n: n[2])[:most]
