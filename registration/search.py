@@ -191,14 +191,15 @@ def measured_normal(points, reach):
         return None
     n, phi = vec[:, 0], float(np.arcsin(np.sqrt(len(i) / lam[1])))
     # The slabs' edges a.u = b (both sides of each pair's), their corners where two meet, the corners in every slab.
-    across = d @ np.column_stack(perpendicular_basis(n))
+    along, across = d @ n, d @ np.column_stack(perpendicular_basis(n))
     a = np.concatenate([across, across])
-    b = np.concatenate([np.ones(len(d)), -np.ones(len(d))]) / np.cos(phi) - np.concatenate([d @ n, d @ n])
+    b = np.concatenate([np.ones(len(d)), -np.ones(len(d))]) / np.cos(phi) - np.concatenate([along, along])
     k, m = np.triu_indices(len(a), 1)
     det = a[k, 0] * a[m, 1] - a[k, 1] * a[m, 0]
-    k, m, det = k[np.abs(det) > 1e-12], m[np.abs(det) > 1e-12], det[np.abs(det) > 1e-12]
+    meet = np.abs(det) > 1e-12
+    k, m, det = k[meet], m[meet], det[meet]
     corners = np.column_stack([b[k] * a[m, 1] - b[m] * a[k, 1], a[k, 0] * b[m] - a[m, 0] * b[k]]) / det[:, None]
-    inside = np.all(np.abs(d @ n + corners @ across.T) <= (1.0 + 1e-7) / np.cos(phi), axis=1)
+    inside = np.all(np.abs(along + corners @ across.T) <= (1.0 + 1e-7) / np.cos(phi), axis=1)
     if inside.any():
         phi = min(phi, float(np.arctan(np.linalg.norm(corners[inside], axis=1).max())))
     return n, phi
@@ -262,9 +263,9 @@ def normal_signs(normal, plane, level, others, heights):
     sin(phi/2) |p - c|`` meets its heights."""
     _, n, phi = normal
     d = others - plane.mean(axis=0)
-    chord = 2.0 * np.sin(phi / 2.0) * np.linalg.norm(d, axis=1)
-    return tuple(s for s in (1.0, -1.0) if np.all((s * d @ n + level[1] + chord >= heights[:, 0]) &
-                                                  (s * d @ n + level[0] - chord <= heights[:, 1])))
+    along, chord = d @ n, 2.0 * np.sin(phi / 2.0) * np.linalg.norm(d, axis=1)
+    return tuple(s for s in (1.0, -1.0) if np.all((s * along + level[1] + chord >= heights[:, 0]) &
+                                                  (s * along + level[0] - chord <= heights[:, 1])))
 
 
 def tube_turns(normal, pairs, most=TUBE_BOXES):
@@ -430,8 +431,8 @@ class Tree:
         # Each touch's patch box, grown by how far a touch that passes may lie off its patch: the patch's
         # tolerance and widening, its distance off the surface, a ball's radius.
         self.patch_low, self.patch_high = np.array([box[0] for box in boxes]), np.array([box[1] for box in boxes])
-        self.grow = patch_growth(self.root, self.dev, self.offset)
-        self.low, self.high = self.patch_low - self.grow[:, None], self.patch_high + self.grow[:, None]
+        grow = patch_growth(self.root, self.dev, self.offset)
+        self.low, self.high = self.patch_low - grow[:, None], self.patch_high + grow[:, None]
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
@@ -521,23 +522,22 @@ class Tree:
         """Each plane touched twice or more: (fixture normal, its touches in the measurement frame, their reach
         in mm, their indices). (Only when asked: the unlabelled search builds many trees only to bound with
         them.)"""
-        out = []
-        for k in range(len(self.problem.groups)):
-            idx = np.flatnonzero(self.owner == k)
-            if len(idx) >= 2 and np.all(self.core[idx] == "plane") and np.allclose(self.offset[idx], self.offset[idx[0]]):
-                out.append((self.direction[idx[0]], self.points[idx], self.root + self.dev[idx], idx))
-        return out
+        return [(self.direction[idx[0]], self.points[idx], self.root + self.dev[idx], idx)
+                for idx in self._touched("plane") if np.allclose(self.offset[idx], self.offset[idx[0]])]
 
     @functools.cached_property
     def lines(self):
         """Each line or cylinder touched twice or more: (fixture axis, its touches in the measurement frame, how
         far each may lie from the axis in mm: its contact offset and reach)."""
-        out = []
+        return [(self.direction[idx[0]], self.points[idx], self.offset[idx] + self.root + self.dev[idx])
+                for idx in self._touched("line")]
+
+    def _touched(self, core):
+        """The touches' indices of each group touched twice or more on an element with this core."""
         for k in range(len(self.problem.groups)):
             idx = np.flatnonzero(self.owner == k)
-            if len(idx) >= 2 and np.all(self.core[idx] == "line"):
-                out.append((self.direction[idx[0]], self.points[idx], self.offset[idx] + self.root + self.dev[idx]))
-        return out
+            if len(idx) >= 2 and np.all(self.core[idx] == core):
+                yield idx
 
     @functools.cached_property
     def normals(self):
