@@ -93,8 +93,8 @@ class Problem:
                 return value
         self._count_rows()
         value = np.concatenate([np.zeros(0)] + [
-            np.full(g.count * g.rows, radius_change(g)) if radius_change(g) is not None else
-            _radius_difference(lambda grow: self._rows(g, rotation, translation, grow)[0]) for g in self.batches])
+            radius_rows(g, g.count * g.rows, lambda grow: self._rows(g, rotation, translation, grow)[0])
+            for g in self.batches])
         self._radius_derivative = (rotation, translation, value)
         return value
 
@@ -145,14 +145,15 @@ class Problem:
         if self.tolerance is None:
             return r, J
 
-        def radius_rows():
+        def radius_derivative():
+            K = len(rotations)
             drho = np.concatenate([
-                np.full((len(rotations), g.count * rows), radius_change(g)) if radius_change(g) is not None else
-                _radius_difference(lambda grow: self._group_rows(g, rotations, translations, grow)[0].reshape(
-                    len(rotations), -1)) for g, rows in zip(self.groups, self._batch_layout[2])], axis=1)
+                radius_rows(g, (K, g.count * rows),
+                            lambda grow: self._group_rows(g, rotations, translations, grow)[0].reshape(K, -1))
+                for g, rows in zip(self.groups, self._batch_layout[2])], axis=1)
             return drho if without is None else drho * kept
 
-        Jd = mode_rows(self.tolerance, feature, J, lambda fid: self.tolerance.modes[fid].twists, radius_rows)
+        Jd = mode_rows(self.tolerance, feature, J, lambda fid: self.tolerance.modes[fid].twists, radius_derivative)
         whiten = whitening(self.tolerance, Jd, self.sigma)
         return whiten(r), whiten(J)
 
@@ -221,6 +222,13 @@ def radius_change(group):
     if "r" not in group.fixture.geometry:
         return 0.0
     return -1.0 if group.ctype.sensor == "P" else None
+
+
+def radius_rows(group, shape, rows_at):
+    """How a group's rows (``shape``) change as its feature's radius grows, per mm: :func:`radius_change`
+    where it is exact, else the central difference of ``rows_at(grow)`` (its rows with the radius grown)."""
+    change = radius_change(group)
+    return np.full(shape, change) if change is not None else _radius_difference(rows_at)
 
 
 def _radius_difference(rows_at):
