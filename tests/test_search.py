@@ -303,13 +303,7 @@ def test_the_normals_turns_hold_every_turn_that_keeps_each_plane_s_touches_on_it
         R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
         normals, groups = [], []
         for _ in range(count):
-            f = rng.normal(size=3)
-            f /= np.linalg.norm(f)
-            u, w = np.linalg.svd(f[None])[2][1:]
-            n = rng.integers(3, 6)
-            local = rng.uniform(-40, 40, (n, 1)) * u + rng.uniform(-40, 40, (n, 1)) * w + rng.uniform(-20, 20) * f
-            reach = rng.uniform(0.01, 0.3, n)
-            points = (local + rng.uniform(-1, 1, (n, 1)) * reach[:, None] * f) @ R.T + t
+            f, points, reach = _plane_layout(rng, rng.integers(3, 6), R, t, rng.uniform(-20, 20))
             normal = measured_normal(points, reach)
             if normal is not None:
                 normals.append((f, *normal, (1.0, -1.0)))
@@ -340,14 +334,15 @@ def keep_lines(turns, lines):
     return fits
 
 
-def _plane_layout(rng, n, R, t, level=0.0):
-    """A plane ``f.x = level`` (mm), f at a random angle, touched n times, each touch within 0.01-0.3 mm of it, at
-    the pose (R, t): (fixture normal, touches in the measurement frame (n, 3), reach (n,))."""
+def _plane_layout(rng, n, R, t, level=0.0, size=40.0, reach=None):
+    """A plane ``f.x = level`` (mm), f at a random angle, touched n times over +-``size`` mm, each touch within its
+    ``reach`` of it (mm; by default 0.01-0.3 at random), at the pose (R, t): (fixture normal, touches in the
+    measurement frame (n, 3), reach (n,))."""
     f = rng.normal(size=3)
     f /= np.linalg.norm(f)
     u, w = np.linalg.svd(f[None])[2][1:]
-    local = rng.uniform(-40, 40, (n, 1)) * u + rng.uniform(-40, 40, (n, 1)) * w + level * f
-    reach = rng.uniform(0.01, 0.3, n)
+    local = rng.uniform(-size, size, (n, 1)) * u + rng.uniform(-size, size, (n, 1)) * w + level * f
+    reach = rng.uniform(0.01, 0.3, n) if reach is None else reach
     return f, (local + rng.uniform(-1, 1, (n, 1)) * reach[:, None] * f) @ R.T + t, reach
 
 
@@ -418,12 +413,8 @@ def test_a_plane_s_measured_normal_holds_every_normal_that_fits_its_touches():
     near, checked = 0, 0
     for _ in range(200):
         count, size = rng.integers(3, 9), rng.uniform(10, 40)
-        f = rng.normal(size=3)
-        f /= np.linalg.norm(f)
-        u, w = np.linalg.svd(f[None])[2][1:]
         reach = np.exp(rng.uniform(np.log(0.01), np.log(3.0), count))
-        points = rng.uniform(-size, size, (count, 1)) * u + rng.uniform(-size, size, (count, 1)) * w + \
-            rng.uniform(-1, 1, (count, 1)) * reach[:, None] * f
+        _, points, reach = _plane_layout(rng, count, np.eye(3), np.zeros(3), size=size, reach=reach)
         normal = measured_normal(points, reach)
         if normal is None:
             continue
