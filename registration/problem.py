@@ -43,8 +43,8 @@ class Problem:
     @functools.cached_property
     def batches(self):
         """Rows are computed per contact type: groups of one type on different features are stacked into one call
-        of the contact model. (Only when rows are asked for: the unlabelled search builds many problems only to
-        bound them.)"""
+        of the contact model. (Only when rows are asked for: the unlabelled search builds a problem per assignment
+        the touches' shape admits, most of them only to search.)"""
         return _merge(self.groups)
 
     def point_touches(self):

@@ -160,7 +160,7 @@ def stand_in_tree(problem, threshold):
     groups, kappa2, left, found, without = stand_ins(problem, threshold)
     sensors = [(g, k) for g, k in without if bounded(g)]
     problem = Problem(groups, problem.sigma, problem.lever, problem.tolerance)
-    return Tree(problem, threshold / kappa2, None, found, sensors, 1.0 / kappa2), left - len(sensors)
+    return Tree(problem, threshold / kappa2, found, sensors, 1.0 / kappa2), left - len(sensors)
 
 
 def first_cells():
@@ -381,12 +381,12 @@ def beyond_pi(v, w):
 
 
 class Tree:
-    """The branch and bound of the module doc over one problem's point and ball touches (``centroid``: the
-    point whose image is y, by default theirs); the last groups, one touch each, may be sensors' stand-ins
+    """The branch and bound of the module doc over one problem's point and ball touches (y the image of
+    their centroid); the last groups, one touch each, may be sensors' stand-ins
     (:class:`.stand_ins.StandIn`). ``sensors``: (group, k) of sensor touches bounded by their own rows
     (:mod:`.sensor_bounds`), their bound times ``weight``."""
 
-    def __init__(self, problem, threshold, centroid=None, stand_ins=(), sensors=(), weight=1.0):
+    def __init__(self, problem, threshold, stand_ins=(), sensors=(), weight=1.0):
         self.problem = problem.point_touches()
         groups = self.problem.groups
         # Every row the search bounds, sensors' included: what fixes the pose, and what regions' poses are refined on.
@@ -404,8 +404,7 @@ class Tree:
         if not groups:
             return
         self.points = np.concatenate([g.points for g in groups])
-        # y is the image of this point: the touches' centroid, or one that several trees share (:mod:`.unlabelled`).
-        self.centroid = self.points.mean(axis=0) if centroid is None else np.asarray(centroid, float)
+        self.centroid = self.points.mean(axis=0)  # y is its image
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
         self.modes(groups, problem.tolerance, threshold / problem.sigma**2, stand_ins, [g for g, _ in sensors])
@@ -520,8 +519,7 @@ class Tree:
     @functools.cached_property
     def planes(self):
         """Each plane touched twice or more: (fixture normal, its touches in the measurement frame, their reach
-        in mm, their indices). (Only when asked: the unlabelled search builds many trees only to bound with
-        them.)"""
+        in mm, their indices)."""
         return [(self.direction[idx[0]], self.points[idx], self.root + self.dev[idx], idx)
                 for idx in self._touched("plane") if np.allclose(self.offset[idx], self.offset[idx[0]])]
 
@@ -571,8 +569,8 @@ class Tree:
     @functools.cached_property
     def fixes_pose(self):
         """Whether the rows can fix a pose: their largest rank at a few rotations (it drops at special ones), the
-        touches' centroid on the touched patches' centre. (The bounds hold either way: :mod:`.unlabelled` uses
-        them where the rows leave motions free, and asks this of fewer trees than it bounds with.)"""
+        touches' centroid on the touched patches' centre. (The bounds hold either way: :mod:`.unlabelled` searches
+        assignments whose rows leave motions free, for where no region is left.)"""
         groups = self.problem.groups
         if not groups:
             return False
@@ -911,15 +909,6 @@ class Tree:
         terms = np.where((shifted <= 0.0) & (beta2 > 1e-30), np.inf, terms)
         c.least = np.maximum(c.Q0 - np.sum(terms, axis=1) - lam * c.delta**2, 0.0)
 
-    @staticmethod
-    def turned(lo, hi, Q):
-        """Boxes (lo, hi) on one set of axes held in boxes on axes turned by Q (columns: the old axes on the
-        new, ``Q`` to the tree's axes, ``Q.T`` back)."""
-        finite = np.all(np.isfinite(lo) & np.isfinite(hi), axis=1)[:, None]
-        centre = np.where(finite, 0.5 * (lo + hi), 0.0) @ Q
-        half = np.where(finite, np.where(finite, 0.5 * (hi - lo), 0.0) @ np.abs(Q), np.inf)
-        return centre - half, centre + half
-
     def box_centre(self, c):
         """The centres (K, 3) of the cells' y boxes, fixture frame (0 along an unbounded axis)."""
         return box_middle(c.ylo, c.yhi) @ self.Q.T
@@ -1004,9 +993,8 @@ class Tree:
             ylo, yhi = np.concatenate([ylo, c.ylo[narrow]]), np.concatenate([yhi, c.yhi[narrow]])
         return None, f"cells still wider than a leaf after {MAX_LEVELS} levels"
 
-    def regions(self, start=None, partial=False, stop=None):
-        """:class:`Regions` over the cells ``start`` (v, w, ylo, yhi; the y boxes on the fixture frame's axes),
-        or over every rotation and image. ``partial``: sensors' rows are left out, which may narrow what the rows
+    def regions(self, partial=False, stop=None):
+        """:class:`Regions` over every rotation and image. ``partial``: sensors' rows are left out, which may narrow what the rows
         searched leave wide: a region whose pose passes is settled however wide (splitting it finer would not
         narrow it), and the search stops past ``PARTIAL_CELLS`` cells (the rows searched leave the pose weak).
 
@@ -1017,14 +1005,14 @@ class Tree:
         (``weak``, not complete)."""
         kept = []
         try:
-            return self._regions(start, partial, Tries(stop, WEAK_TRIES), Tries(stop, WEAK_TRIES), kept)
+            return self._regions(partial, Tries(stop, WEAK_TRIES), Tries(stop, WEAK_TRIES), kept)
         except WeakPose as weak:
             return Regions(complete=False, cells=kept, weak=weak.found,
                            reason="stopped at a pose that passes but that the touches determine too weakly to judge")
 
-    def _regions(self, start, partial, level_tries, region_tries, kept):
+    def _regions(self, partial, level_tries, region_tries, kept):
         """:meth:`regions`' search, its stop tried on valleys' cells and on wide regions' poses."""
-        start = self.first_cells() if start is None else (start[0], start[1], *self.turned(start[2], start[3], self.Q))
+        start = self.first_cells()
         budget = PARTIAL_CELLS if partial else None
         leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget, level_tries)
         if leaves is None:
@@ -1187,8 +1175,8 @@ def patch_growth(root, dev, offset):
 
 def by_value(function):
     """``function`` of a few small arrays, memoised on their values: the labelled search under each assignment
-    (:mod:`.unlabelled`) builds the same spans, inverses and swings hundreds of times a call. What it returns is
-    shared: read only."""
+    (:mod:`.unlabelled`) builds the same spans, inverses and swings up to hundreds of times a call. What it
+    returns is shared: read only."""
     kept = {}
 
     @functools.wraps(function)

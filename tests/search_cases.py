@@ -157,6 +157,11 @@ CASES = [
     # Its three equal balls on a circle: the poses are the turns that swap them.
     Case("sphere-plate 4-4-4, unlabelled", "sphere-plate", (SIGMA_MM,),
          _counts({"ball_1": 4, "ball_2": 4, "ball_3": 4}), unlabelled=True, symmetric=True),
+    # Its flats swap under a half turn: the two poses are images of each other.
+    Case("quarter-sphere 4-4-4, unlabelled", "quarter-sphere", (SIGMA_MM,),
+         _counts({"flat_a": 4, "flat_b": 4, "sphere": 4}), unlabelled=True, symmetric=True),
+    Case("inclined-plane-cylinder 6+6, unlabelled", "inclined-plane-cylinder", (SIGMA_MM,),
+         _counts({"plane": 6, "cylinder": 6}), unlabelled=True),
     # Six bosses leaning every way, touched by a point probe: no box axis follows their axes.
     Case("{C-R-C}x6 design's bosses 2 each", BOSSES, (0.0, SIGMA_MM),
          _counts({f"boss_{k}": 2 for k in range(1, 7)})),

@@ -12,6 +12,7 @@ import sys
 import numpy as np
 import pytest
 
+from fixturecad.registration import assignments
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.generate import write_register_script
 from fixturecad.registration.patches import patch_points
@@ -120,8 +121,32 @@ def test_register_py_takes_unlabelled_touches_from_a_csv(tmp_path):
     assert [a["feature"] for a in result["assignment"]] == ["groove_a"] * 4 + ["groove_b"] * 4 + ["end"] * 4
 
 
-def test_a_first_search_that_stops_says_incomplete_and_gives_poses_that_fit():
-    # The quarter-sphere's flats and sphere lie close together: the first search stops (docs/registration.md).
+def test_the_quarter_sphere_gives_the_truth_and_the_half_turn_that_swaps_its_flats():
+    _, features, truth, touches = _case("quarter-sphere", {"flat_a": 4, "flat_b": 4, "sphere": 4}, 1)
+    result = register_touches(features, {}, unlabelled=np.concatenate(list(touches.values())), sigma_mm=SIGMA_MM)
+    assert result["status"] == "ambiguous" and result["search"] == "complete"
+    assert len(result["solutions"]) == 2
+    found = [s for s in result["solutions"] if _within(s["pose"], truth)]
+    other = [s for s in result["solutions"] if not _within(s["pose"], truth)]
+    assert len(found) == len(other) == 1
+    assert [a["feature"] for a in found[0]["assignment"]] == ["flat_a"] * 4 + ["flat_b"] * 4 + ["sphere"] * 4
+    # The half turn puts each flat's touches on the other flat, and fits them as exactly.
+    assert [a["feature"] for a in other[0]["assignment"]] == ["flat_b"] * 4 + ["flat_a"] * 4 + ["sphere"] * 4
+    assert max(abs(a["residual_mm"]) for a in other[0]["assignment"]) < 1e-4
+
+
+def test_the_inclined_plane_and_its_cylinder_unlabelled_are_unique():
+    _, features, truth, touches = _case("inclined-plane-cylinder", {"plane": 6, "cylinder": 6}, 1, SIGMA_MM)
+    result = register_touches(features, {}, unlabelled=np.concatenate(list(touches.values())), sigma_mm=SIGMA_MM)
+    assert result["status"] == "unique" and result["search"] == "complete"
+    dt, dr = pose_errors(np.array(result["pose"]), truth)
+    assert dt < 5 * np.sqrt(3) * result["sigma_translation_mm"] + 1e-3
+    assert [a["feature"] for a in result["assignment"]] == ["plane"] * 6 + ["cylinder"] * 6
+
+
+def test_assignments_not_told_say_incomplete_and_give_poses_that_fit(monkeypatch):
+    # The interpretation tree stops past MAX_ROWS assignments (here 50: the quarter-sphere's keep 2,000).
+    monkeypatch.setattr(assignments, "MAX_ROWS", 50)
     _, features, truth, touches = _case("quarter-sphere", {"flat_a": 4, "flat_b": 4, "sphere": 4}, 1)
     result = register_touches(features, {}, unlabelled=np.concatenate(list(touches.values())), sigma_mm=SIGMA_MM)
     assert result["search"] == "incomplete" and "not told" in result["search_reason"]

@@ -1,0 +1,312 @@
+"""Which features unlabelled touches may lie on, from the touches' own shape: every assignment under which a
+pose may pass, whatever the pose.
+
+A rigid motion keeps the touches' distances. At a pose that passes under an assignment each touch lies within
+its reach ``r = sqrt(T) + e`` (``e`` the printed part's deviation bound, :func:`.search.deviation_bound`) of its
+feature, its contact offset ``R`` off the feature's core (a ball's radius, a sphere's or a cylinder's), and
+within the feature's patch box grown as the labelled search grows it (:func:`.search.patch_growth`). So:
+
+* two touches on features f and g lie as far apart as two points of their grown boxes can: between the boxes'
+  least and greatest distances; two on one sphere at most its diameter ``2 (R + r)``;
+* four touches on one plane lie in a slab ``2 r`` wide: their tetrahedron's least width (its faces' heights
+  and its opposite edges' distances, where a polytope's least width lies) is at most ``2 r``;
+* four on one sphere or point, centre c: ``|p_k - c|^2 - |p_0 - c|^2 = |d_k|^2 - 2 d_k.(c - p_0)`` (``d_k =
+  p_k - p_0``) lies within ``+-((R + r)^2 - max(R - r, 0)^2)``, three slabs whose parallelepiped holds c, and
+  ``|p_0 - c|`` lies within ``R +- r`` for a c in it;
+* four on one cylinder or line: two touches farther apart than ``2 (R + r)`` keep its axis within
+  ``arcsin(2 (R + r) / |d|)`` of their difference's line (the part of d across the axis is at most ``2 (R +
+  r)``), and any two such cones of the quad's six pairs meet.
+
+An interpretation tree (Grimson and Lozano-Perez 1987) takes the touches in turn, the labelled ones first:
+each assignment of the touches so far that passes every test among them is extended by each feature the next
+touch may take. Every test is a necessary condition, so the tree's leaves hold every assignment under which a
+pose passes; the labelled search (:mod:`.search`) decides each, with its own guarantee.
+
+This module imports numpy only and nothing of fixturecad: it is inlined into the generated standalone
+``register.py``.
+"""
+
+import itertools
+
+import numpy as np
+
+from .elements import perpendicular_basis
+from .patches import patch_box
+from .search import contact_offset, deviation_bound, patch_growth
+
+MAX_ROWS = 200_000  # assignments of the touches so far kept at most (memory: rows x touches)
+AXIS_TOUCHES = 5  # a cylinder's or line's touches, this many or more, searched for an axis they fit
+AXIS_CELLS = 4  # the axis search's first cells: this many a side on each of three cube faces ...
+AXIS_LEVELS = 8  # ... split this many times at most (a cell then 0.0014 rad across) ...
+AXIS_KEPT = 2000  # ... while a set keeps at most this many cells (it is taken to fit past either)
+AXIS_PAIRS = 8  # the narrowest cones about the set's pairs' lines that bound the axis search's cells
+CHUNK = 4096  # rows tested at once against the quads
+SLACK = 1e-9  # relative: rounding kept on the tests' side
+
+
+def admitted(groups, surfaces, points, ball_radius_mm, tolerance, q, root):
+    """Every assignment of the unlabelled ``points`` (n, 3), mm, to the ``surfaces`` that the touches' shape
+    admits beside the labelled point and ball touches of ``groups``, as tuples of feature ids; the reason when
+    the tree stopped (else ""); the assignments kept per touch. ``q``: the test's threshold over sigma^2 (for
+    the deviation bounds); ``root``: its square root in mm."""
+    places, slots = [], []
+    for g in groups:
+        if g.points is None:
+            continue  # a sensor: not among the touches the tree takes
+        places.append(g.points)
+        for offset in contact_offset(g):
+            slots.append([(g.feature, float(offset))])
+    places.append(points)
+    slots += [[(f, float(f.core()[3] + ball_radius_mm)) for f in surfaces]] * len(points)
+    # The distinct (feature, offset) pairs: the tests' elements.
+    elements = list(dict.fromkeys((f.id, offset) for options in slots for f, offset in options))
+    features = {f.id: f for options in slots for f, _ in options}
+    options = [np.array([elements.index((f.id, offset)) for f, offset in o]) for o in slots]
+    places = np.concatenate(places)
+    tables = Tables([features[fid] for fid, _ in elements], np.array([o for _, o in elements]), places,
+                    tolerance, q, root)
+    labelled = len(places) - len(points)
+    rows, kept = np.zeros((1, 0), int), []
+    for choices in options:
+        rows = tables.extend(rows, choices)
+        kept.append(len(rows))
+        if len(rows) > MAX_ROWS:
+            return [], f"the touches' features were not told within {MAX_ROWS} assignments", kept
+    rows = tables.on_axes(rows)
+    return [tuple(elements[k][0] for k in row[labelled:]) for row in rows], "", kept
+
+
+class Tables:
+    """The tests of the module doc, computed once for every pair and quad of touches on each element."""
+
+    def __init__(self, features, offsets, places, tolerance, q, root):
+        self.places = places
+        n, S = len(places), len(features)
+        self.core = [f.core()[0] for f in features]
+        dev = np.array([0.0 if tolerance is None else float(deviation_bound(tolerance, f, q)) for f in features])
+        self.reach, self.offsets = root + dev, offsets
+        grow = patch_growth(root, dev, offsets)
+        boxes = np.array([patch_box(f) for f in features])
+        low, high = boxes[:, 0] - grow[:, None], boxes[:, 1] + grow[:, None]
+        least, most = box_distances(low, high)
+        sphere = np.array([c == "point" for c in self.core]) & (offsets > 0.0)
+        most[np.diag_indices(S)] = np.where(sphere, np.minimum(np.diag(most), 2.0 * (offsets + self.reach)),
+                                            np.diag(most))
+        distance = np.linalg.norm(places[:, None] - places[None], axis=2)
+        # pair[i, j, s, t]: touch i on element s and touch j on t may lie this far apart.
+        self.pair = ((distance[:, :, None, None] >= least * (1.0 - SLACK) - SLACK)
+                     & (distance[:, :, None, None] <= most * (1.0 + SLACK) + SLACK))
+        # bad[s][i, j, k, l]: four touches that cannot lie on element s together (None: no test on it).
+        quads = np.array(list(itertools.combinations(range(n), 4))).reshape(-1, 4)
+        self.bad = []
+        for s in range(S):
+            test = QUAD_TESTS.get(self.core[s])
+            if test is None or not len(quads):
+                self.bad.append(None)
+                continue
+            table = np.zeros((n, n, n, n), np.float32)
+            fails = ~test(places[quads], offsets[s], self.reach[s])
+            for order in itertools.permutations(range(4)):
+                table[tuple(quads[:, order].T)] = fails
+            self.bad.append(table)
+
+    def extend(self, rows, choices):
+        """The rows (assignments of the first d touches, element indices) extended by each of the next touch's
+        ``choices`` that passes the tests with the touches before it."""
+        d = rows.shape[1]
+        new = np.repeat(rows, len(choices), axis=0)
+        k = np.tile(choices, len(rows))
+        ok = np.all(self.pair[d, np.arange(d), k[:, None], new], axis=1)
+        for s in np.unique(k):
+            if self.bad[s] is None or d < 3:
+                continue
+            bad = self.bad[s][d, :d, :d, :d].reshape(d * d, d)
+            for start in range(0, len(new), CHUNK):
+                part = slice(start, start + CHUNK)
+                mine = (k[part] == s) & ok[part]
+                if not mine.any():
+                    continue
+                group = (new[part][mine] == s).astype(np.float32)  # (m, d): the touches on s before this one
+                together = (group[:, :, None] * group[:, None, :]).reshape(len(group), d * d)
+                conflicts = np.einsum("mj,mj->m", together @ bad, group)
+                idx = np.flatnonzero(mine) + start
+                ok[idx[conflicts > 0]] = False
+        return np.column_stack([new, k])[ok]
+
+    def on_axes(self, rows):
+        """The rows whose touches on each cylinder or line, ``AXIS_TOUCHES`` or more, may fit one axis
+        (:func:`fit_an_axis`)."""
+        keep = np.ones(len(rows), bool)
+        for s in np.flatnonzero(np.array(self.core) == "line"):
+            on = rows == s
+            big = on.sum(axis=1) >= AXIS_TOUCHES
+            if not big.any():
+                continue
+            sets, inverse = np.unique(on[big], axis=0, return_inverse=True)
+            size = sets.sum(axis=1)
+            fits = np.ones(len(sets), bool)
+            # The smallest sets first: a set holding one that fits no axis fits none.
+            for m in np.unique(size):
+                misfits = sets[~fits].astype(int)
+                holds = (sets.astype(int) @ misfits.T == misfits.sum(axis=1)).any(axis=1)
+                fits &= ~holds
+                now = np.flatnonzero((size == m) & fits)
+                if len(now):
+                    fits[now] = fit_an_axis([self.places[k] for k in sets[now]], self.offsets[s], self.reach[s])
+            keep[np.flatnonzero(big)[~fits[inverse.ravel()]]] = False
+        return rows[keep]
+
+
+def fit_an_axis(sets, radius, reach):
+    """Whether each set of touches (list of (m, 3)) may lie within ``reach`` of one cylinder of ``radius``
+    (mm; 0: a line): False only where a branch and bound over the axis's direction leaves none.
+
+    Directions, up to sign, are the points of three faces of the cube about the origin (|x|, |y| or |z| the
+    largest, 1); a square cell of half-width h holds directions within ``beta = sqrt(2) h`` of its middle's a0
+    (a segment s long at least 1 from the origin subtends at most s). Say the touches fit the axis through c, the
+    point nearest their centroid m, along a within beta of a0: m lies within ``R + r`` of it (the distance from
+    a line is convex), so each touch's distance from the axis along a0 through c is within ``beta L_i``, ``L_i
+    = |p_i - m| + R + r``, of its own, in ``[lo_i, hi_i] = R +- (r + beta L_i)``. Across a0, with m at the
+    origin, c' lies within ``R + r`` of it and ``|q_i - c'|^2 - |q_0 - c'|^2``, linear in c', within ``[lo_i^2 -
+    hi_0^2, hi_i^2 - lo_0^2]``: two such slabs (touch 0 the farthest from m, touch 1 the farthest from it,
+    touch 2 the farthest off their line) hold c' in a parallelogram, and every touch's distance from a point of
+    it must meet its ``[lo, hi]``; and a0 must lie within ``beta`` of each of the set's narrowest cones about
+    its pairs' lines (as the quads' test). A cell that fails is dropped, the others split in four."""
+    sizes = np.array([len(p) for p in sets])
+    M = sizes.max()
+    points = np.zeros((len(sets), M, 3))
+    mask = np.arange(M) < sizes[:, None]
+    for g, p in enumerate(sets):
+        points[g, :len(p)] = p - p.mean(axis=0)
+    lever = np.where(mask, np.linalg.norm(points, axis=2), 0.0) + radius + reach
+    # Each set's narrowest cones about its pairs' lines (the quads' test): the axis lies within each.
+    i, j = np.triu_indices(M, 1)
+    d = points[:, j] - points[:, i]
+    length = np.where(mask[:, i] & mask[:, j], np.linalg.norm(d, axis=2), 0.0)
+    ratio = np.clip(2.0 * (radius + reach) * (1.0 + SLACK) / np.where(length > 0.0, length, 1.0), 0.0, 1.0)
+    cone = np.where(length > 0.0, np.arcsin(ratio), np.pi / 2.0)
+    narrow = np.argsort(cone, axis=1)[:, :AXIS_PAIRS]
+    cone = np.take_along_axis(cone, narrow, axis=1)
+    lines = np.take_along_axis(d / np.where(length > 0.0, length, 1.0)[..., None], narrow[..., None], axis=1)
+    # The first cells: (set, face, u, v), half-width h.
+    side = (2 * np.arange(AXIS_CELLS) + 1) / AXIS_CELLS - 1.0
+    face, u, v = (x.ravel() for x in np.meshgrid(np.arange(3), side, side, indexing="ij"))
+    g = np.repeat(np.arange(len(sets)), len(face))
+    face, u, v = np.tile(face, len(sets)), np.tile(u, len(sets)), np.tile(v, len(sets))
+    h = 1.0 / AXIS_CELLS
+    fits = np.zeros(len(sets), bool)
+    for _ in range(AXIS_LEVELS + 1):
+        corner = np.stack([np.ones_like(u), u, v], axis=1)
+        a0 = np.take_along_axis(corner, (np.arange(3)[None] - face[:, None]) % 3, axis=1)  # face k: a0_k = 1
+        a0 /= np.linalg.norm(a0, axis=1, keepdims=True)
+        beta = np.sqrt(2.0) * h
+        off = np.arccos(np.clip(np.abs(np.einsum("kpi,ki->kp", lines[g], a0)), 0.0, 1.0))
+        keep = np.all(off <= cone[g] + beta + SLACK, axis=1)
+        g, face, u, v, a0 = g[keep], face[keep], u[keep], v[keep], a0[keep]
+        keep = _axis_cells(points[g], mask[g], lever[g], a0, beta, radius, reach)
+        g, face, u, v = g[keep], face[keep], u[keep], v[keep]
+        counts = np.bincount(g, minlength=len(sets))
+        done = counts > AXIS_KEPT
+        fits |= done
+        alive = ~done[g]
+        g, face, u, v = g[alive], face[alive], u[alive], v[alive]
+        if not len(g):
+            return fits
+        h /= 2.0
+        du, dv = np.array([-h, h, -h, h]), np.array([-h, -h, h, h])
+        g, face = np.repeat(g, 4), np.repeat(face, 4)
+        u, v = (np.repeat(u, 4) + np.tile(du, len(u))), (np.repeat(v, 4) + np.tile(dv, len(v)))
+    return fits | (np.bincount(g, minlength=len(sets)) > 0)
+
+
+def _axis_cells(points, mask, lever, a0, beta, radius, reach):
+    """The cells (K) of :func:`fit_an_axis` that may hold an axis: touches (K, M, 3) about their centroid,
+    ``mask`` the real ones, their levers L (K, M), each cell's middle direction a0 (K, 3), and the cells'
+    radius beta (rad)."""
+    e1, e2 = perpendicular_basis(a0)
+    q = np.stack([np.einsum("kmi,ki->km", points, e1), np.einsum("kmi,ki->km", points, e2)], axis=2)
+    slack = reach + beta * lever
+    lo, hi = np.maximum(radius - slack, 0.0), radius + slack
+    far = np.where(mask, np.linalg.norm(q, axis=2), -np.inf)
+    rows = np.arange(len(q))
+    i0 = np.argmax(far, axis=1)
+    d = q - q[rows, i0][:, None]
+    i1 = np.argmax(np.where(mask, np.linalg.norm(d, axis=2), -np.inf), axis=1)
+    off_line = d[..., 0] * d[rows, i1][:, None, 1] - d[..., 1] * d[rows, i1][:, None, 0]
+    i2 = np.argmax(np.where(mask, np.abs(off_line), -np.inf), axis=1)
+    normals = np.stack([d[rows, i1], d[rows, i2]], axis=1)  # (K, 2, 2): n_i = q_i - q_0
+    sq = np.sum(q**2, axis=2)
+    base = (sq[rows, [i1, i2]].T - sq[rows, i0][:, None])  # |q_i|^2 - |q_0|^2, (K, 2)
+    low = 0.5 * (base - hi[rows, [i1, i2]].T ** 2 + lo[rows, i0][:, None] ** 2)
+    high = 0.5 * (base - lo[rows, [i1, i2]].T ** 2 + hi[rows, i0][:, None] ** 2)
+    det = normals[:, 0, 0] * normals[:, 1, 1] - normals[:, 0, 1] * normals[:, 1, 0]
+    scale = np.linalg.norm(normals, axis=(1, 2)) ** 2
+    solvable = np.abs(det) > 1e-9 * scale
+    inverse = np.linalg.inv(np.where(solvable[:, None, None], normals, np.eye(2)))
+    middle = np.einsum("kij,kj->ki", inverse, 0.5 * (low + high))
+    half = 0.5 * (high - low)
+    spread = np.maximum(np.linalg.norm(np.einsum("kij,kj->ki", inverse, half), axis=1),
+                        np.linalg.norm(np.einsum("kij,kj->ki", inverse, half * [1.0, -1.0]), axis=1))
+    distance = np.linalg.norm(q - middle[:, None], axis=2)
+    misses = mask & ((distance - spread[:, None] > hi * (1.0 + SLACK) + SLACK)
+                     | (distance + spread[:, None] < lo - SLACK))
+    away = np.linalg.norm(middle, axis=1) - spread > (radius + reach) * (1.0 + SLACK) + SLACK
+    return ~solvable | ~(misses.any(axis=1) | away)
+
+
+def box_distances(low, high):
+    """The least and the greatest distance (S, S) between a point of box s and a point of box t (boxes (S, 3)
+    from ``low`` to ``high``): the gap and the span axis by axis."""
+    gap = np.maximum(0.0, np.maximum(low[:, None] - high[None], low[None] - high[:, None]))
+    span = np.maximum(np.abs(high[:, None] - low[None]), np.abs(high[None] - low[:, None]))
+    return np.linalg.norm(gap, axis=2), np.linalg.norm(span, axis=2)
+
+
+def _plane(P, offset, reach):
+    """Quads (Q, 4, 3) whose tetrahedron's least width is at most 2 reach."""
+    e = P[:, 1:] - P[:, :1]
+    volume6 = np.abs(np.linalg.det(e))
+    widths = []
+    for k in range(4):
+        a, b, c = (m for m in range(4) if m != k)
+        area2 = np.linalg.norm(np.cross(P[:, b] - P[:, a], P[:, c] - P[:, a]), axis=1)
+        widths.append(np.where(area2 > 0.0, volume6 / np.where(area2 > 0.0, area2, 1.0), 0.0))
+    for (a, b), (c, d) in (((0, 1), (2, 3)), ((0, 2), (1, 3)), ((0, 3), (1, 2))):
+        across = np.linalg.norm(np.cross(P[:, b] - P[:, a], P[:, d] - P[:, c]), axis=1)
+        widths.append(np.where(across > 0.0, volume6 / np.where(across > 0.0, across, 1.0), np.inf))
+    return np.min(widths, axis=0) <= 2.0 * reach * (1.0 + SLACK) + SLACK
+
+
+def _sphere(P, radius, reach):
+    """Quads whose sphere centre, as the slabs of the module doc hold it, may lie within radius +- reach of
+    the first touch; every quad passes whose first three differences are nearly dependent."""
+    d = P[:, 1:] - P[:, :1]
+    b = 0.5 * np.sum(d**2, axis=2)
+    scale = np.linalg.norm(d, axis=(1, 2)) ** 3
+    det = np.linalg.det(d)
+    solvable = np.abs(det) > 1e-9 * scale
+    inverse = np.linalg.inv(np.where(solvable[:, None, None], d, np.eye(3)))
+    centre = np.einsum("qij,qj->qi", inverse, b)
+    slab = 0.5 * ((radius + reach) ** 2 - max(radius - reach, 0.0) ** 2)
+    half = np.linalg.norm(np.abs(inverse) @ np.full(3, slab), axis=1)
+    far = np.linalg.norm(centre, axis=1)
+    fits = (far - half <= (radius + reach) * (1.0 + SLACK) + SLACK) & (far + half >= radius - reach - SLACK)
+    return fits | ~solvable
+
+
+def _line(P, radius, reach):
+    """Quads whose pairs' cones about the axis (module doc) meet two by two."""
+    i, j = np.array(list(itertools.combinations(range(4), 2))).T
+    d = P[:, j] - P[:, i]  # (Q, 6, 3)
+    length = np.linalg.norm(d, axis=2)
+    ratio = np.clip(2.0 * (radius + reach) * (1.0 + SLACK) / np.where(length > 0.0, length, 1.0), 0.0, 1.0)
+    cone = np.where(length > 0.0, np.arcsin(ratio), np.pi / 2.0)
+    unit = d / np.where(length > 0.0, length, 1.0)[..., None]
+    fits = np.ones(len(P), bool)
+    for a, b in itertools.combinations(range(6), 2):
+        cosine = np.clip(np.abs(np.sum(unit[:, a] * unit[:, b], axis=1)), 0.0, 1.0)
+        fits &= np.arccos(cosine) <= cone[:, a] + cone[:, b] + SLACK
+    return fits
+
+
+QUAD_TESTS = {"plane": _plane, "point": _sphere, "line": _line}
