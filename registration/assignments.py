@@ -164,10 +164,11 @@ def fit_an_axis(sets, radius, reach):
     Directions, up to sign, are the points of three faces of the cube about the origin (|x|, |y| or |z| the
     largest, 1); a square cell of half-width h holds directions within ``beta = sqrt(2) h`` of its middle's a0
     (a segment s long at least 1 from the origin subtends at most s). Say the touches fit the axis through c, the
-    point nearest their centroid m, along a within beta of a0: m lies within ``R + r`` of it (the distance from
-    a line is convex), so each touch's distance from the axis along a0 through c is within ``beta L_i``, ``L_i
-    = |p_i - m| + R + r``, of its own, in ``[lo_i, hi_i] = R +- (r + beta L_i)``. Across a0, with m at the
-    origin, c' lies within ``R + r`` of it and ``|q_i - c'|^2 - |q_0 - c'|^2``, linear in c', within ``[lo_i^2 -
+    point nearest their centroid m, along a within theta <= beta of a0: m lies within ``R + r`` of it (the
+    distance from a line is convex). A touch ``p - c = s a + u`` (u across a, ``|u| = d``) lies across a0 at
+    ``|s P0 a + P0 u|``, with ``|P0 a| = sin(theta)`` and ``d cos(theta) <= |P0 u| <= d``; and ``|s| = |(p -
+    m).a| <= |(p - m).a0| + beta |p - m|``. So its distance from the axis along a0 through c lies in ``[lo, hi]
+    = R +- (r + beta |s| + R beta^2 / 2)``. Across a0, with m at the origin, c' lies within ``R + r`` of it and ``|q_i - c'|^2 - |q_0 - c'|^2``, linear in c', within ``[lo_i^2 -
     hi_0^2, hi_i^2 - lo_0^2]``: two such slabs (touch 0 the farthest from m, touch 1 the farthest from it,
     touch 2 the farthest off their line) hold c' in a parallelogram, and every touch's distance from a point of
     it must meet its ``[lo, hi]``; and a0 must lie within ``beta`` of each of the set's narrowest cones about
@@ -178,7 +179,7 @@ def fit_an_axis(sets, radius, reach):
     mask = np.arange(M) < sizes[:, None]
     for g, p in enumerate(sets):
         points[g, :len(p)] = p - p.mean(axis=0)
-    lever = np.where(mask, np.linalg.norm(points, axis=2), 0.0) + radius + reach
+    far = np.where(mask, np.linalg.norm(points, axis=2), 0.0)  # |p - m|
     # Each set's narrowest cones about its pairs' lines (the quads' test): the axis lies within each.
     i, j = np.triu_indices(M, 1)
     d = points[:, j] - points[:, i]
@@ -203,7 +204,7 @@ def fit_an_axis(sets, radius, reach):
         off = np.arccos(np.clip(np.abs(np.einsum("kpi,ki->kp", lines[g], a0)), 0.0, 1.0))
         keep = np.all(off <= cone[g] + beta + SLACK, axis=1)
         g, face, u, v, a0 = g[keep], face[keep], u[keep], v[keep], a0[keep]
-        keep = _axis_cells(points[g], mask[g], lever[g], a0, beta, radius, reach)
+        keep = _axis_cells(points[g], mask[g], far[g], a0, beta, radius, reach)
         g, face, u, v = g[keep], face[keep], u[keep], v[keep]
         counts = np.bincount(g, minlength=len(sets))
         done = counts > AXIS_KEPT
@@ -219,17 +220,15 @@ def fit_an_axis(sets, radius, reach):
     return fits | (np.bincount(g, minlength=len(sets)) > 0)
 
 
-def _axis_cells(points, mask, lever, a0, beta, radius, reach):
+def _axis_cells(points, mask, far, a0, beta, radius, reach):
     """The cells (K) of :func:`fit_an_axis` that may hold an axis: touches (K, M, 3) about their centroid,
-    ``mask`` the real ones, their levers L (K, M), each cell's middle direction a0 (K, 3), and the cells'
-    radius beta (rad)."""
+    ``mask`` the real ones, their distances from it (K, M), each cell's middle direction a0 (K, 3), and the
+    cells' radius beta (rad)."""
     e1, e2 = perpendicular_basis(a0)
     q = np.stack([np.einsum("kmi,ki->km", points, e1), np.einsum("kmi,ki->km", points, e2)], axis=2)
-    slack = reach + beta * lever
-    lo, hi = np.maximum(radius - slack, 0.0), radius + slack
-    far = np.where(mask, np.linalg.norm(q, axis=2), -np.inf)
+    lo, hi = axis_ranges(points, far, a0, beta, radius, reach)
     rows = np.arange(len(q))
-    i0 = np.argmax(far, axis=1)
+    i0 = np.argmax(np.where(mask, np.linalg.norm(q, axis=2), -np.inf), axis=1)
     d = q - q[rows, i0][:, None]
     i1 = np.argmax(np.where(mask, np.linalg.norm(d, axis=2), -np.inf), axis=1)
     off_line = d[..., 0] * d[rows, i1][:, None, 1] - d[..., 1] * d[rows, i1][:, None, 0]
@@ -252,6 +251,16 @@ def _axis_cells(points, mask, lever, a0, beta, radius, reach):
                      | (distance + spread[:, None] < lo - SLACK))
     away = np.linalg.norm(middle, axis=1) - spread > (radius + reach) * (1.0 + SLACK) + SLACK
     return ~solvable | ~(misses.any(axis=1) | away)
+
+
+def axis_ranges(points, far, a0, beta, radius, reach):
+    """Each touch's range ``[lo, hi]`` (K, M), mm, of distances from the line along a0 (K, 3) through the axis's
+    point nearest the touches' centroid, where the touches (K, M, 3, about their centroid; ``far`` their
+    distances from it) lie within ``reach`` of a cylinder of ``radius`` whose axis lies within ``beta`` (rad)
+    of a0 (:func:`fit_an_axis`)."""
+    along = np.abs(np.einsum("kmi,ki->km", points, a0)) + beta * far
+    slack = reach + beta * along + 0.5 * radius * beta**2
+    return np.maximum(radius - slack, 0.0), radius + slack
 
 
 def box_distances(low, high):
