@@ -201,8 +201,9 @@ def fit_an_axis(sets, radius, reach):
         a0 = np.take_along_axis(corner, (np.arange(3)[None] - face[:, None]) % 3, axis=1)  # face k: a0_k = 1
         a0 /= np.linalg.norm(a0, axis=1, keepdims=True)
         beta = np.sqrt(2.0) * h
-        off = np.arccos(np.clip(np.abs(np.einsum("kpi,ki->kp", lines[g], a0)), 0.0, 1.0))
-        keep = np.all(off <= cone[g] + beta + SLACK, axis=1)
+        wide = cone + beta + SLACK
+        least = np.where(wide < np.pi / 2.0, np.cos(np.minimum(wide, np.pi / 2.0)), 0.0)  # |a0.line| in each cone
+        keep = np.all(np.abs(lines[g] @ a0[:, :, None])[..., 0] >= least[g], axis=1)
         g, face, u, v, a0 = g[keep], face[keep], u[keep], v[keep], a0[keep]
         keep = _axis_cells(points[g], mask[g], far[g], a0, beta, radius, reach)
         g, face, u, v = g[keep], face[keep], u[keep], v[keep]
@@ -224,29 +225,28 @@ def _axis_cells(points, mask, far, a0, beta, radius, reach):
     """The cells (K) of :func:`fit_an_axis` that may hold an axis: touches (K, M, 3) about their centroid,
     ``mask`` the real ones, their distances from it (K, M), each cell's middle direction a0 (K, 3), and the
     cells' radius beta (rad)."""
-    e1, e2 = perpendicular_basis(a0)
-    q = np.stack([np.einsum("kmi,ki->km", points, e1), np.einsum("kmi,ki->km", points, e2)], axis=2)
+    q = points @ np.stack(perpendicular_basis(a0), axis=2)  # (K, M, 2)
     lo, hi = axis_ranges(points, far, a0, beta, radius, reach)
     rows = np.arange(len(q))
-    i0 = np.argmax(np.where(mask, np.linalg.norm(q, axis=2), -np.inf), axis=1)
+    sq = q[..., 0] ** 2 + q[..., 1] ** 2
+    i0 = np.argmax(np.where(mask, sq, -np.inf), axis=1)
     d = q - q[rows, i0][:, None]
-    i1 = np.argmax(np.where(mask, np.linalg.norm(d, axis=2), -np.inf), axis=1)
+    i1 = np.argmax(np.where(mask, d[..., 0] ** 2 + d[..., 1] ** 2, -np.inf), axis=1)
     off_line = d[..., 0] * d[rows, i1][:, None, 1] - d[..., 1] * d[rows, i1][:, None, 0]
     i2 = np.argmax(np.where(mask, np.abs(off_line), -np.inf), axis=1)
     normals = np.stack([d[rows, i1], d[rows, i2]], axis=1)  # (K, 2, 2): n_i = q_i - q_0
-    sq = np.sum(q**2, axis=2)
     base = (sq[rows, [i1, i2]].T - sq[rows, i0][:, None])  # |q_i|^2 - |q_0|^2, (K, 2)
     low = 0.5 * (base - hi[rows, [i1, i2]].T ** 2 + lo[rows, i0][:, None] ** 2)
     high = 0.5 * (base - lo[rows, [i1, i2]].T ** 2 + hi[rows, i0][:, None] ** 2)
     det = normals[:, 0, 0] * normals[:, 1, 1] - normals[:, 0, 1] * normals[:, 1, 0]
-    scale = np.linalg.norm(normals, axis=(1, 2)) ** 2
-    solvable = np.abs(det) > 1e-9 * scale
-    inverse = np.linalg.inv(np.where(solvable[:, None, None], normals, np.eye(2)))
-    middle = np.einsum("kij,kj->ki", inverse, 0.5 * (low + high))
+    solvable = np.abs(det) > 1e-9 * np.sum(normals**2, axis=(1, 2))
+    inverse = np.stack([normals[:, 1, 1], -normals[:, 0, 1], -normals[:, 1, 0], normals[:, 0, 0]], axis=1)
+    inverse = inverse.reshape(-1, 2, 2) / np.where(solvable, det, 1.0)[:, None, None]
+    middle = (inverse @ (0.5 * (low + high))[..., None])[..., 0]
     half = 0.5 * (high - low)
-    spread = np.maximum(np.linalg.norm(np.einsum("kij,kj->ki", inverse, half), axis=1),
-                        np.linalg.norm(np.einsum("kij,kj->ki", inverse, half * [1.0, -1.0]), axis=1))
-    distance = np.linalg.norm(q - middle[:, None], axis=2)
+    corners = inverse @ (half[:, :, None] * [[1.0, 1.0], [1.0, -1.0]])  # (K, 2, 2): two half-diagonals
+    spread = np.sqrt(np.max(np.sum(corners**2, axis=1), axis=1))
+    distance = np.hypot(q[..., 0] - middle[:, None, 0], q[..., 1] - middle[:, None, 1])
     misses = mask & ((distance - spread[:, None] > hi * (1.0 + SLACK) + SLACK)
                      | (distance + spread[:, None] < lo - SLACK))
     away = np.linalg.norm(middle, axis=1) - spread > (radius + reach) * (1.0 + SLACK) + SLACK
@@ -258,7 +258,7 @@ def axis_ranges(points, far, a0, beta, radius, reach):
     point nearest the touches' centroid, where the touches (K, M, 3, about their centroid; ``far`` their
     distances from it) lie within ``reach`` of a cylinder of ``radius`` whose axis lies within ``beta`` (rad)
     of a0 (:func:`fit_an_axis`)."""
-    along = np.abs(np.einsum("kmi,ki->km", points, a0)) + beta * far
+    along = np.abs(points @ a0[:, :, None])[..., 0] + beta * far
     slack = reach + beta * along + 0.5 * radius * beta**2
     return np.maximum(radius - slack, 0.0), radius + slack
 
