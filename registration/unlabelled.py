@@ -22,8 +22,6 @@ from .solve import Solutions, solve, told_apart
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
 
-RELAX = 100.0  # when no pose passes under any assignment, the threshold is raised by this factor ...
-RELAX_ROUNDS = 4  # ... at most this many times, to find the assignments the least-cost poses take
 LOCAL_ROUNDS = 2  # a search that stops: each touch put on its nearest feature this many times from each start
 
 
@@ -116,13 +114,17 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
         return assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
                                 tolerance, made)
 
-    def solved(threshold):
-        """The solutions under every admitted assignment whose search at ``threshold`` leaves a region, and
-        the reason the assignments were not told (else "")."""
-        leaves, reason, kept = admitted(groups, surfaces, points, ball_radius_mm, tolerance, threshold / sigma_mm**2,
-                                        float(np.sqrt(threshold)))
-        found = []
-        for assignment in leaves:
+    def searched(keep):
+        """Each admitted assignment of the touches ``keep`` (a mask; None: the others left out) whose search
+        leaves a region, with its problem and regions; the reason the assignments were not told (else "");
+        the assignments kept per touch."""
+        leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance,
+                                        threshold / sigma_mm**2, float(np.sqrt(threshold)))
+        out = []
+        for leaf in leaves:
+            assignment = np.full(len(points), None, dtype=object)
+            assignment[keep] = leaf
+            assignment = tuple(assignment)
             problem = problem_of(assignment)
             tree, left = stand_in_tree(problem, threshold)
             regions = tree.regions(partial=left > 0)
@@ -130,28 +132,34 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
                 regions.complete = False
                 regions.reason = "the touches fit an assignment of them that does not fix a pose"
             if regions.poses or not regions.complete:
-                found += _solved(problem, assignment, out, regions)
-        return found, reason, kept
+                out.append((assignment, problem, regions))
+        return out, reason, kept
 
     # Every surface gives a point touch one row: the test's threshold is the same under every assignment.
     threshold = threshold_mm2(problem_of([surfaces[0].id] * len(points)))
     out = Solutions()
-    found, reason, out.cells = solved(threshold)
-    if reason:
-        out.search, out.reason = "incomplete", reason
-    elif out.search != "incomplete":
-        out.search = "complete"
-    relaxed, stopped = threshold, reason
-    for _ in range(RELAX_ROUNDS if not (found or reason) else 0):
-        # No pose passes under any assignment: the assignments of the least-cost poses, for what the verdict
-        # says of them (inconsistent, and which touches fit no feature).
-        relaxed *= RELAX
-        found, stopped, _ = solved(relaxed)
-        if found or stopped:
+    everyone = np.ones(len(points), bool)
+    leaves, reason, out.cells = searched(everyone)
+    out.search, out.reason = ("incomplete", reason) if reason else ("complete", "")
+    found = [s for assignment, problem, regions in leaves for s in _solved(problem, assignment, out, regions)]
+    for i in range(len(points) if not (found or reason) else 0):
+        # No pose passes under any assignment: each touch left out in turn (one that fits no feature); the first
+        # that leaves a region gives its poses, refined with the touch on its nearest feature there, for what the
+        # verdict says of them (inconsistent, and which touches fit no feature).
+        rest = everyone.copy()
+        rest[i] = False
+        for assignment, problem, regions in searched(rest)[0]:
+            for R, t in regions.poses:
+                pose = np.eye(4)
+                pose[:3, :3], pose[:3, 3] = R, t
+                assignment = assignment[:i] + nearest_assignment(features, points[i:i + 1], pose,
+                                                                 ball_radius_mm) + assignment[i + 1:]
+                found += _solved(problem_of(assignment), assignment, out, initial_pose=pose)
+        if found:
             break
-    if not found and stopped:
-        # The assignments were not told: poses refined from every first-level rotation (the touches' centroid
-        # on the surfaces' middle), each touch on its nearest feature.
+    if not found:
+        # The assignments were not told, or no touch left out leaves a pose: poses refined from every
+        # first-level rotation (the touches' centroid on the surfaces' middle), each touch on its nearest feature.
         R = rotation_from_vector(first_cells()[0])
         boxes = np.array([patch_box(f) for f in surfaces])
         middle = np.mean(np.where(np.isfinite(boxes), boxes, 0.0).mean(axis=1), axis=0)

@@ -144,6 +144,24 @@ def test_the_inclined_plane_and_its_cylinder_unlabelled_are_unique():
     assert [a["feature"] for a in result["assignment"]] == ["plane"] * 6 + ["cylinder"] * 6
 
 
+@pytest.mark.parametrize("name,counts", [("v-block", {"groove_a": 4, "groove_b": 4, "end": 4}),
+                                         ("inclined-plane-cylinder", {"plane": 6, "cylinder": 6})])
+def test_a_touch_moved_off_its_feature_is_the_culprit(name, counts):
+    """Touch 5 moved 1 mm out of its feature: no pose passes under any assignment (inconsistent, the search
+    complete); each touch left out in turn finds the pose, and the verdict names touch 5, every touch on the
+    feature it was made on."""
+    _, features, truth, touches = _case(name, counts, 3, SIGMA_MM)
+    points = np.concatenate(list(touches.values()))
+    own = [fid for fid, n in counts.items() for _ in range(n)]
+    local = (points[5] - truth[:3, 3]) @ truth[:3, :3]
+    points[5] += truth[:3, :3] @ features[own[5]].normal_at(local[None])[0]
+    result = register_touches(features, {}, unlabelled=points, sigma_mm=SIGMA_MM)
+    assert result["status"] == "inconsistent" and result["search"] == "complete"
+    assert result["culprit"] == 5
+    assert [a["feature"] for a in result["assignment"]] == own
+    assert _within(result["flagged"][0]["pose"], truth, 0.05, 0.05)
+
+
 def test_assignments_not_told_say_incomplete_and_give_poses_that_fit(monkeypatch):
     # The interpretation tree stops past MAX_ROWS assignments (here 50: the quarter-sphere's keep 2,000).
     monkeypatch.setattr(assignments, "MAX_ROWS", 50)
