@@ -207,7 +207,7 @@ def test_the_search_moves_a_printed_stand_in_as_the_print_does(template, fid, na
         group = contact_touch(feature, name, sensor, 0, fixture=fixture, contact_point=point)
         one = stand_in(group, 0, THRESHOLD_MM2, 20.0)
         tree = Tree(Problem([point_touches(one.feature, one.point, group.index)], 0.005, tolerance=tolerance),
-                    THRESHOLD_MM2, None, [one])
+                    THRESHOLD_MM2, [one])
         unit, touch = tree.row_unit[None], tree.row_touch
         if not tree.flat[0]:
             unit, touch = one.feature.normal_at(one.point)[None], np.array([0])  # a round stand-in's one row
