@@ -15,7 +15,8 @@ within the feature's patch box grown as the labelled search grows it (:func:`.se
   ``|p_0 - c|`` lies within ``R +- r`` for a c in it;
 * four on one cylinder or line: two touches farther apart than ``2 (R + r)`` keep its axis within
   ``arcsin(2 (R + r) / |d|)`` of their difference's line (the part of d across the axis is at most ``2 (R +
-  r)``), and any two such cones of the quad's six pairs meet.
+  r)``), and any two such cones of the quad's six pairs meet;
+* five or more on one cylinder or line fit one axis (:func:`fit_an_axis`), tested on the tree's leaves.
 
 An interpretation tree (Grimson and Lozano-Perez 1987) takes the touches in turn, the labelled ones first:
 each assignment of the touches so far that passes every test among them is extended by each feature the next

@@ -115,12 +115,12 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
                                 tolerance, made)
 
     def searched(keep):
-        """Each admitted assignment of the touches ``keep`` (a mask; None: the others left out) whose search
-        leaves a region, with its problem and regions; the reason the assignments were not told (else "");
-        the assignments kept per touch."""
+        """Each admitted assignment of the touches ``keep`` (a mask; the others left out, None in it) whose
+        search leaves a region, with its problem and regions; the reason the assignments were not told (else
+        ""); the assignments kept per touch."""
         leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance,
                                         threshold / sigma_mm**2, float(np.sqrt(threshold)))
-        out = []
+        found = []
         for leaf in leaves:
             assignment = np.full(len(points), None, dtype=object)
             assignment[keep] = leaf
@@ -132,8 +132,8 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
                 regions.complete = False
                 regions.reason = "the touches fit an assignment of them that does not fix a pose"
             if regions.poses or not regions.complete:
-                out.append((assignment, problem, regions))
-        return out, reason, kept
+                found.append((assignment, problem, regions))
+        return found, reason, kept
 
     # Every surface gives a point touch one row: the test's threshold is the same under every assignment.
     threshold = threshold_mm2(problem_of([surfaces[0].id] * len(points)))
@@ -152,9 +152,9 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
             for R, t in regions.poses:
                 pose = np.eye(4)
                 pose[:3, :3], pose[:3, 3] = R, t
-                assignment = assignment[:i] + nearest_assignment(features, points[i:i + 1], pose,
-                                                                 ball_radius_mm) + assignment[i + 1:]
-                found += _solved(problem_of(assignment), assignment, out, initial_pose=pose)
+                full = assignment[:i] + nearest_assignment(features, points[i:i + 1], pose, ball_radius_mm) \
+                    + assignment[i + 1:]
+                found += _solved(problem_of(full), full, out, initial_pose=pose)
         if found:
             break
     if not found:

@@ -3,7 +3,9 @@ pass is left out.
 
 Independent answers: touches drawn on each feature's patch and moved off its surface by their whole reach, in
 or out, at a random pose, so that each test's premise holds at its edge: their own assignment must be admitted.
-Each quad test alone against quads drawn the same way, and against quads that plainly cannot lie on the element.
+Each quad test alone against quads drawn the same way, and against quads that plainly cannot lie on the element;
+the boxes' distances against sampled points; the axis search against touches on a cylinder or a line, with and
+without a plane's touches among them, and its ranges against the exact distance from a tilted line.
 """
 
 import numpy as np
