@@ -183,13 +183,11 @@ def fit_an_axis(sets, radius, reach):
     far = np.where(mask, np.linalg.norm(points, axis=2), 0.0)  # |p - m|
     # Each set's narrowest cones about its pairs' lines (the quads' test): the axis lies within each.
     i, j = np.triu_indices(M, 1)
-    d = points[:, j] - points[:, i]
-    length = np.where(mask[:, i] & mask[:, j], np.linalg.norm(d, axis=2), 0.0)
-    ratio = np.clip(2.0 * (radius + reach) * (1.0 + SLACK) / np.where(length > 0.0, length, 1.0), 0.0, 1.0)
-    cone = np.where(length > 0.0, np.arcsin(ratio), np.pi / 2.0)
+    cone, lines = pair_cones(np.where((mask[:, i] & mask[:, j])[..., None], points[:, j] - points[:, i], 0.0),
+                             radius, reach)
     narrow = np.argsort(cone, axis=1)[:, :AXIS_PAIRS]
     cone = np.take_along_axis(cone, narrow, axis=1)
-    lines = np.take_along_axis(d / np.where(length > 0.0, length, 1.0)[..., None], narrow[..., None], axis=1)
+    lines = np.take_along_axis(lines, narrow[..., None], axis=1)
     # The first cells: (set, face, u, v), half-width h.
     side = (2 * np.arange(AXIS_CELLS) + 1) / AXIS_CELLS - 1.0
     face, u, v = (x.ravel() for x in np.meshgrid(np.arange(3), side, side, indexing="ij"))
@@ -307,16 +305,22 @@ def _sphere(P, radius, reach):
 def _line(P, radius, reach):
     """Quads whose pairs' cones about the axis (module doc) meet two by two."""
     i, j = np.array(list(itertools.combinations(range(4), 2))).T
-    d = P[:, j] - P[:, i]  # (Q, 6, 3)
-    length = np.linalg.norm(d, axis=2)
-    ratio = np.clip(2.0 * (radius + reach) * (1.0 + SLACK) / np.where(length > 0.0, length, 1.0), 0.0, 1.0)
-    cone = np.where(length > 0.0, np.arcsin(ratio), np.pi / 2.0)
-    unit = d / np.where(length > 0.0, length, 1.0)[..., None]
+    cone, unit = pair_cones(P[:, j] - P[:, i], radius, reach)  # (Q, 6)
     fits = np.ones(len(P), bool)
     for a, b in itertools.combinations(range(6), 2):
         cosine = np.clip(np.abs(np.sum(unit[:, a] * unit[:, b], axis=1)), 0.0, 1.0)
         fits &= np.arccos(cosine) <= cone[:, a] + cone[:, b] + SLACK
     return fits
+
+
+def pair_cones(d, radius, reach):
+    """Each pair's cone about the axis of a cylinder (or line) of ``radius`` both touches lie within ``reach``
+    of, from their difference d (..., 3): the axis lies within ``arcsin(2 (R + r) / |d|)`` of d's line (rad; pi/2
+    where they lie no farther apart than its diameter, or d is 0), and that line's unit vector (0 for d 0)."""
+    length = np.linalg.norm(d, axis=-1)
+    some = np.where(length > 0.0, length, 1.0)
+    ratio = np.clip(2.0 * (radius + reach) * (1.0 + SLACK) / some, 0.0, 1.0)
+    return np.where(length > 0.0, np.arcsin(ratio), np.pi / 2.0), d / some[..., None]
 
 
 QUAD_TESTS = {"plane": _plane, "point": _sphere, "line": _line}
