@@ -45,11 +45,12 @@ def check_fixture_tolerance(value: float) -> float:
 
 
 def features_document(template: "Template", stl_tolerance: float = DEFAULT_STL_TOLERANCE_MM,
-                      fixture_tolerance: float = DEFAULT_ZONE_MM, touch_candidates=None) -> dict:
-    """The features.json of a build of ``template`` (no CAD needed; the build adds its ``touch_candidates``)."""
+                      fixture_tolerance: float = DEFAULT_ZONE_MM, touch_candidates=None, faces=None) -> dict:
+    """The features.json of a build of ``template`` (no CAD needed; the build adds its ``touch_candidates`` and
+    ``faces``)."""
     files = {"step": FILES["step"], "stl": FILES["stl"], "3mf": FILES["3mf"], "stl_tolerance_mm": stl_tolerance,
              "preview": FILES["preview"]}
-    return features_json.document(template, files, fixture_tolerance, touch_candidates)
+    return features_json.document(template, files, fixture_tolerance, touch_candidates, faces)
 
 
 def touch_template(template: "Template") -> str:
@@ -138,6 +139,7 @@ def build(template: "Template", target: Path, force: bool = False,
 def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture_tolerance: float, side) -> None:
     from fixturecad.cad.brep import match_features
     from fixturecad.cad.export import Named, export
+    from fixturecad.cad.faces import faces_record
     from fixturecad.cad.mesh import triangulate
     from fixturecad.registration.sampling import read_triangles
     from fixturecad.cad.solid import fixture_solid
@@ -161,7 +163,7 @@ def _write_all(template: "Template", folder: Path, stl_tolerance: float, fixture
              for f in features if f.kind != "point"]
     export(shape, [folder / FILES[kind] for kind in ("step", "stl", "3mf")], stl_tolerance, template.slug(), named)
     document = features_document(template, stl_tolerance, fixture_tolerance,
-                                 touch_candidates(features, read_triangles(folder / FILES["stl"])))
+                                 touch_candidates(features, read_triangles(folder / FILES["stl"])), faces_record(shape))
     features_json.write(document, folder / FILES["features"])
     side.send(("register", document, folder / FILES["register"]))
     (folder / FILES["touches"]).write_text(touch_template(template), encoding="utf-8")

@@ -38,9 +38,10 @@ def validate(document: dict) -> None:
     validator_for(schema)(schema).validate(document)
 
 
-def document(template, files: dict, fixture_tolerance_mm: float, touch_candidates=None) -> dict:
+def document(template, files: dict, fixture_tolerance_mm: float, touch_candidates=None, faces=None) -> dict:
     """The features.json content of a template instance (no CAD needed); ``files`` its "files" entry;
-    ``touch_candidates`` the reachable touches a build finds on its mesh (:func:`.build.touch_candidates`)."""
+    ``touch_candidates`` the reachable touches a build finds on its mesh (:func:`.build.touch_candidates`);
+    ``faces`` every face of its solid as features, or the reason there are none (:func:`.cad.faces.face_features`)."""
     plans = template.touch_plans()
     return {
         "schema": schema_id(),
@@ -56,6 +57,7 @@ def document(template, files: dict, fixture_tolerance_mm: float, touch_candidate
         "files": files,
         "features": [feature.to_json() for feature in template.features()],
         "plans": {name: plan.to_json() for name, plan in plans.items()},
+        **({} if faces is None else {"faces": faces}),
         **({} if touch_candidates is None else {"touch_candidates": touch_candidates}),
         **template.extras(),
     }

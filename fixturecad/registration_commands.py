@@ -69,6 +69,7 @@ def register(
     target_sigma: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS translation standard deviation, mm.")] = None,
     target_sigma_deg: Annotated[float | None, typer.Option(help="Accuracy wanted: RMS rotation standard deviation, deg.")] = None,
     unlabelled: Annotated[bool, typer.Option(help="Take every point touch as unlabelled: on some plane, sphere or cylinder, not said which (an empty feature in a CSV, null in JSON, is unlabelled already).")] = False,
+    anywhere: Annotated[bool, typer.Option(help="The unlabelled touches lie anywhere on the part (on any face of the solid), not only on its sensing features.")] = False,
 ):
     """Pose of the fixture's datum frame (fixture2meas) from touches, on the folder's features.json (the
     copy in its register.py is for register.py run alone).
@@ -77,7 +78,7 @@ def register(
     """
     from fixturecad.registration.deviations import tolerance_from_document
     from fixturecad.registration.engine import register_touches
-    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.features import faces_from_json, features_from_json
     from fixturecad.registration.planning import stored_candidates
     from fixturecad.registration.touchfile import exit_code, register_file, repeated_warning, report, target
 
@@ -86,14 +87,16 @@ def register(
     document = features_json.read(out_dir)  # one line for a missing, damaged or older features.json
     features, candidates = features_from_json(document), stored_candidates(document)
 
-    def routine(touches, fixture_tolerance_mm=None, **options):
-        return register_touches(features, touches, tolerance=tolerance_from_document(features, document, fixture_tolerance_mm),
-                                candidates=candidates, **options)
+    def routine(touches, fixture_tolerance_mm=None, anywhere=False, **options):
+        faces = faces_from_json(document) if anywhere else {}
+        tolerance = tolerance_from_document({**features, **faces}, document, fixture_tolerance_mm)
+        return register_touches(features, touches, tolerance=tolerance, candidates=candidates, faces=faces or None,
+                                **options)
 
     try:
         result = register_file(features, routine, touches, sigma, lever, ball_radius, fixture_tolerance,
                                target(target_sigma, target_sigma_deg), units and units.value, (candidates, document.get("volume_mm3")),
-                               unlabelled)
+                               unlabelled, anywhere)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     if repeated_warning(result):
@@ -116,6 +119,7 @@ def simulate(
     out: Annotated[Path | None, typer.Option(help=f"Folder for {SUMMARY_NAME} and {PLOT_NAME} [default: the fixture folder].")] = None,
     force: Annotated[bool, typer.Option(help=f"Replace {SUMMARY_NAME} and {PLOT_NAME} written earlier.")] = False,
     unlabelled: Annotated[bool, typer.Option(help="Register the point touches without their labels (the bound is that of the same touches labelled).")] = False,
+    anywhere: Annotated[bool, typer.Option(help="Draw the point touches anywhere on the part a probe reaches, not on the plan's features, and register them unlabelled, on any face (the bound: the same touches labelled with their faces).")] = False,
 ):
     """Register synthetic noisy touches sampled on the STL; compare the errors with the Cramer-Rao bound.
 
@@ -128,7 +132,7 @@ def simulate(
     import numpy as np
 
     from fixturecad.registration.deviations import tolerance_from_document
-    from fixturecad.registration.features import features_from_json
+    from fixturecad.registration.features import faces_from_json, features_from_json
     from fixturecad.registration.sampling import TouchSampler, load_mesh
 
     if not 1 <= trials <= MAX_TRIALS:
@@ -152,10 +156,12 @@ def simulate(
     routine = load_routine(out_dir)
     if touch_plan not in document["plans"]:
         document = {**document, "plans": {**document["plans"], **_designed_plan(out_dir, touch_plan)}}
+    unlabelled = unlabelled or anywhere
     try:
-        tolerance = tolerance_from_document(features_from_json(document), document, fixture_tolerance)
+        features = {**features_from_json(document), **(faces_from_json(document) if anywhere else {})}
+        tolerance = tolerance_from_document(features, document, fixture_tolerance)
         mesh = load_mesh(stl, document["volume_mm3"])
-        sampler = TouchSampler(document, mesh, touch_plan, plan is Positions.random, tolerance)
+        sampler = TouchSampler(document, mesh, touch_plan, plan is Positions.random, tolerance, anywhere)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
     folder = check_files(out_dir if out is None else out, (SUMMARY_NAME, PLOT_NAME), force)
@@ -168,7 +174,7 @@ def simulate(
     # than the first.
     start = time.perf_counter()
     _trial(routine, sampler, np.random.default_rng([seed, 1]), noise, sigma, nominal, lever, fixture_tolerance,
-           unlabelled)
+           unlabelled, anywhere)
     one = time.perf_counter() - start
     predicted = one * trials
     if predicted > ANNOUNCED_S:
@@ -177,9 +183,10 @@ def simulate(
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
         for _ in bar:
-            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance, unlabelled))
+            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance, unlabelled,
+                                  anywhere))
     summary = summarise(records, noise)
-    summary.update({"trials": trials, "unlabelled": unlabelled, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
+    summary.update({"trials": trials, "unlabelled": unlabelled, "anywhere": anywhere, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,
                     "calibrated": tolerance is not None and "calibration" in document})
     with staged_files(folder, (SUMMARY_NAME, PLOT_NAME)) as staging:
@@ -214,7 +221,7 @@ def _progress_stream():
     return sys.stderr if sys.stderr.isatty() else io.StringIO()
 
 
-def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled=False):
+def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled=False, anywhere=False):
     """One registration of fresh synthetic touches: errors, status and the Cramer-Rao bound.
 
     On a printed part (``sampler.tolerance``), also the errors of a perfect
@@ -222,18 +229,20 @@ def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled
     registered from a nominal pose near the truth, since they split the error
     of the right pose (what the search finds is the first registration's).
     """
-    record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, True, unlabelled)
+    labels = unlabelled, anywhere
+    record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, True, labels)
     if sampler.tolerance is not None:
-        alone = _registration(routine, sampler, rng, noise, sigma, True, lever, zone, False, unlabelled, False)
-        part = _registration(routine, sampler, rng, 0.0, sigma, True, lever, zone, True, unlabelled, False)
+        alone = _registration(routine, sampler, rng, noise, sigma, True, lever, zone, False, labels, False)
+        part = _registration(routine, sampler, rng, 0.0, sigma, True, lever, zone, True, labels, False)
         record.update({f"noise_only_{key}": alone[key] for key in ("translation_error_mm", "rotation_error_deg")})
         record.update({f"fixture_only_{key}": part[key] for key in ("translation_error_mm", "rotation_error_deg")})
     return record
 
 
-def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed, unlabelled, bounds=True):
+def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed, labels, bounds=True):
     """One registration of fresh touches: its status, errors and time, and (``bounds``) the Cramer-Rao bounds of
-    its touches, on the part and on a perfect one."""
+    its touches, on the part and on a perfect one. ``labels``: (unlabelled, anywhere)."""
+    unlabelled, anywhere = labels
     import time
 
     import numpy as np
@@ -257,6 +266,8 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
     start = time.perf_counter()
     # Unlabelled: the point touches without their features (the routine's numbering: after the contacts).
     given = {"touches": {}, "unlabelled": np.concatenate(list(touches.values()))} if unlabelled else {"touches": touches}
+    if anywhere:
+        given["anywhere"] = True
     result = routine.register(**given, initial_pose=initial, sigma_mm=sigma, ball_radius_mm=sampler.ball_radius_mm,
                               contacts=contacts, lever_mm=lever, fixture_tolerance_mm=zone)
     elapsed = time.perf_counter() - start
@@ -433,7 +444,8 @@ def plot_errors(records, summary, path: Path) -> None:
         _plot_assignment(axes[2], assigned)
     part = ("an as-built part" if summary["calibrated"] else "an exact part" if summary["fixture_tolerance_mm"] is None
             else f"parts printed within {summary['fixture_tolerance_mm']:g} mm (the bound counts the print)")
-    fig.suptitle(f"{summary['trials']} trials{' of unlabelled touches' if assigned else ''} on {part}, "
+    touches = " of unlabelled touches anywhere" if summary.get("anywhere") else " of unlabelled touches" if assigned else ""
+    fig.suptitle(f"{summary['trials']} trials{touches} on {part}, "
                  f"noise {summary['noise_mm']} mm, "
                  f"success {100 * summary['success_rate']:.1f} %")
     fig.tight_layout()

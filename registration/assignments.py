@@ -241,11 +241,13 @@ def _axis_cells(points, mask, far, a0, beta, radius, reach):
     solvable = np.abs(det) > 1e-9 * np.sum(normals**2, axis=(1, 2))
     inverse = np.stack([normals[:, 1, 1], -normals[:, 0, 1], -normals[:, 1, 0], normals[:, 0, 0]], axis=1)
     inverse = inverse.reshape(-1, 2, 2) / np.where(solvable, det, 1.0)[:, None, None]
-    middle = (inverse @ (0.5 * (low + high))[..., None])[..., 0]
-    half = 0.5 * (high - low)
-    corners = inverse @ (half[:, :, None] * [[1.0, 1.0], [1.0, -1.0]])  # (K, 2, 2): two half-diagonals
-    spread = np.sqrt(np.max(np.sum(corners**2, axis=1), axis=1))
-    distance = np.hypot(q[..., 0] - middle[:, None, 0], q[..., 1] - middle[:, None, 1])
+    centre, half = 0.5 * (low + high), 0.5 * (high - low)
+    middle = inverse[:, :, 0] * centre[:, :1] + inverse[:, :, 1] * centre[:, 1:]
+    # The parallelogram's half-diagonals a + b and a - b: the longer is |a|^2 + |b|^2 + 2 |a.b| squared.
+    a, b = inverse[:, :, 0] * half[:, :1], inverse[:, :, 1] * half[:, 1:]
+    spread = np.sqrt(np.sum(a * a + b * b, axis=1) + 2.0 * np.abs(np.sum(a * b, axis=1)))
+    dx, dy = q[..., 0] - middle[:, None, 0], q[..., 1] - middle[:, None, 1]
+    distance = np.sqrt(dx * dx + dy * dy)
     misses = mask & ((distance - spread[:, None] > hi * (1.0 + SLACK) + SLACK)
                      | (distance + spread[:, None] < lo - SLACK))
     away = np.linalg.norm(middle, axis=1) - spread > (radius + reach) * (1.0 + SLACK) + SLACK

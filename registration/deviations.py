@@ -243,6 +243,9 @@ def tolerance_from_document(features, document, zone_mm=None):
     calibration = document.get("calibration")
     if calibration is not None and zone_mm is None:
         covariances = {fid: np.asarray(entry["covariance"], float) for fid, entry in calibration["features"].items()}
+        if set(features) - set(covariances):
+            raise ValueError("an as-built part's faces have no calibration (only its sensing features): give a "
+                             "--fixture-tolerance for touches anywhere")
         return FixtureTolerance(features, scheme, 0.0, covariances)
     zone = float(document.get("tolerance", {}).get("zone_mm", 0.0)) if zone_mm is None else float(zone_mm)
     # An as-built part is its own features even when taken as exact.

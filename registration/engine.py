@@ -38,14 +38,15 @@ from .planning import next_touches
 from .redundancy import redundancy
 from .solve import solve
 from .touches import build_groups
-from .unlabelled import assigned, assigned_problem, check_unlabelled, nearest_assignment, solve_unlabelled
+from .unlabelled import (assigned, assigned_problem, check_unlabelled, nearest_assignment, solve_unlabelled,
+                         surface_features)
 from .uncertainty import covariance, covariance_from_information, sigmas
 from .verdict import Solution, judged, same_pose
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
                      contacts=(), approaches=None, lever_mm=SENSOR_LEVER_MM, tolerance=None, plan_next=False,
-                     target_sigma=None, candidates=None, unlabelled=None):
+                     target_sigma=None, candidates=None, unlabelled=None, faces=None):
     """Register a fixture from touches, labelled or not; return the result dict (see module doc).
 
     Parameters
@@ -69,6 +70,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     unlabelled : array-like, shape (n, 3), mm, measurement frame, optional: point touches (ball centres with a
         ball radius) on some plane, sphere or cylinder, not said which; numbered after the labelled touches and
         the contacts. Every pose that passes under some assignment of them is looked for (:mod:`.unlabelled`)
+    faces : dict id -> feature, optional: every face of the part (features.json's ``faces``,
+        :func:`.features.faces_from_json`): the unlabelled touches lie anywhere on the part, on one of these,
+        instead of on the sensing surfaces
     candidates : dict id -> array-like, shape (n, 3), mm, fixture frame, optional: the reachable touches the
         next touch and the planned touches are chosen among (features.json's ``touch_candidates``,
         :func:`.planning.stored_candidates`); without them only a separating touch is named
@@ -98,12 +102,17 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     groups = build_groups(features, touches, ball_radius_mm, contacts, approaches)
     points = check_unlabelled(unlabelled)
     index = np.arange(len(points)) + sum(g.count for g in groups)
+    # What the unlabelled touches may lie on; the problems, verdicts and explanations know both (the planned
+    # touches stay on the sensing features, among the candidates).
+    surfaces = (surface_features(features) if faces is None else list(faces.values())) if len(points) else []
+    planned, features = features, {**features, **(faces or {})}
     if len(points) and initial_pose is None:
-        solutions = solve_unlabelled(groups, features, points, index, ball_radius_mm, sigma_mm, lever_mm, tolerance)
+        solutions = solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm,
+                                     tolerance)
         problem = solutions[0].problem
     else:
         # Near a nominal pose each unlabelled touch is on the feature it lies nearest to there.
-        assignment = nearest_assignment(features, points, initial_pose, ball_radius_mm) if len(points) else ()
+        assignment = nearest_assignment(surfaces, points, initial_pose, ball_radius_mm) if len(points) else ()
         problem = assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
                                    tolerance)
         if not problem.groups:
@@ -130,7 +139,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     elif len(good) > 1:
         status = "ambiguous"
         best = good[0]
-        result["separating_touch"] = separating_touch(features, good)
+        result["separating_touch"] = separating_touch(planned, good)
     else:
         # Two kinds of explanation, both listed: a touch that is off or mislabelled, a feature printed beyond
         # its tolerance.
@@ -143,7 +152,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             # The search missed them: poses that fit every touch after all.
             status, best, good = "unique" if len(missed) == 1 else "ambiguous", missed[0], missed
             if len(missed) > 1:
-                result["separating_touch"] = separating_touch(features, missed)
+                result["separating_touch"] = separating_touch(planned, missed)
         else:
             status = "inconsistent"
             feature_of = {int(i): g.feature.id for g in problem.groups for i in g.index}
@@ -197,9 +206,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         return result  # no pose to plan the next touch or a target from
     if plan_next:
         result["next_touch"] = result["separating_touch"] or (
-            None if candidates is None else _next_touch(features, best, candidates))
+            None if candidates is None else _next_touch(planned, best, candidates))
     if target_sigma is not None:
-        result["target"] = _target(features, best, problem.sigma, target_sigma, (s_t, s_r), candidates)
+        result["target"] = _target(planned, best, problem.sigma, target_sigma, (s_t, s_r), candidates)
     return result
 
 

@@ -343,3 +343,15 @@ def feature_from_json(data: dict):
 def features_from_json(document: dict) -> dict:
     """All features of a features.json document, by id."""
     return {entry["id"]: feature_from_json(entry) for entry in document["features"]}
+
+
+def faces_from_json(document: dict) -> dict:
+    """Every face of the part (features.json's ``faces``, written by a build), by id: where an unlabelled
+    touch made anywhere on the part may lie. ValueError (one line) when the build wrote none."""
+    faces = document.get("faces")
+    if faces is None:
+        raise ValueError("features.json has no faces (built before touches anywhere were read): rebuild the fixture")
+    if isinstance(faces, dict):
+        raise ValueError(f"touches anywhere are not read on this part: {faces['unsupported']} "
+                         "(a face is taken when it is a plane, a convex sphere or a convex cylinder)")
+    return features_from_json({"features": faces})

@@ -159,8 +159,9 @@ def free_motions(problem, solution, features=None, weak=False):
     spheres = [f for f in listed.values() if f.kind == "sphere"]
     for i, a in enumerate(spheres):
         for b in spheres[i + 1:]:
-            lines[f"the line through the centres of {a.id} and {b.id}"] = (
-                a.center, (b.center - a.center) / np.linalg.norm(b.center - a.center))
+            gap = np.linalg.norm(b.center - a.center)
+            if gap > COLLINEAR_MM * max(length, 1.0):  # two spheres about one centre (a face and its feature): no line
+                lines[f"the line through the centres of {a.id} and {b.id}"] = (a.center, (b.center - a.center) / gap)
     for f in listed.values():
         # A feature names its core: a plane, a point or line itself, a sphere's centre, a cylinder's axis.
         core, anchor, direction, _ = f.core()

@@ -15,7 +15,8 @@ from .defaults import SENSOR_LEVER_MM
 from .synthetic import perturb_touches, plan_touches
 from .deviations import entry_on
 from .elements import cross, element
-from .features import feature_from_json
+from .features import faces_from_json, feature_from_json
+from .reach import reachable
 from .tolerance import coordinates, deviated, modes
 from .pose import fixture2meas_from_rt, random_rotation
 
@@ -88,6 +89,12 @@ def sample_on_feature(mesh, faces, feature, count, rng, attempts=20):
 
 def sample_on_faces(mesh, faces, count, rng):
     """Points (count, 3) drawn uniformly by area on the given triangles."""
+    return drawn_on_faces(mesh, faces, count, rng)[0]
+
+
+def drawn_on_faces(mesh, faces, count, rng):
+    """Points (count, 3) drawn uniformly by area on the given triangles, and the triangle (an index into
+    ``faces``) of each."""
     triangles = mesh.triangles[faces]
     area = mesh.area_faces[faces]
     pick = rng.choice(len(faces), size=count, p=area / area.sum())
@@ -95,7 +102,7 @@ def sample_on_faces(mesh, faces, count, rng):
     flip = u + v > 1.0
     u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
     a, b, c = triangles[pick, 0], triangles[pick, 1], triangles[pick, 2]
-    return a + u[:, None] * (b - a) + v[:, None] * (c - a)
+    return a + u[:, None] * (b - a) + v[:, None] * (c - a), pick
 
 
 def closest_on_faces(mesh, faces, points):
@@ -110,10 +117,23 @@ def closest_on_faces(mesh, faces, points):
     return out
 
 
-class TouchSampler:
-    """Draws noisy touches of a touch plan on the STL of a fixture."""
+def face_owners(mesh, faces):
+    """The face (an index into ``faces``, features.json's faces as features) each mesh triangle lies on;
+    ValueError when one lies on none."""
+    owner = np.full(len(mesh.faces), -1)
+    for k, face in enumerate(faces):
+        on = feature_faces(mesh, face)
+        owner[on[owner[on] < 0]] = k
+    if np.any(owner < 0):
+        raise ValueError(f"{np.count_nonzero(owner < 0)} STL triangles lie on no face of features.json: rebuild the fixture")
+    return owner
 
-    def __init__(self, document, mesh, plan="default", random_positions=False, tolerance=None):
+
+class TouchSampler:
+    """Draws noisy touches of a touch plan on the STL of a fixture; ``anywhere``: its point touches anywhere on
+    the part a probe reaches, each on the face (features.json's ``faces``) it lies on."""
+
+    def __init__(self, document, mesh, plan="default", random_positions=False, tolerance=None, anywhere=False):
         self.features = {entry["id"]: feature_from_json(entry) for entry in document["features"]}
         self.tolerance = tolerance  # the FixtureTolerance printed parts are drawn from
         # The mesh is the drawing's: an as-built folder keeps the drawing's features to find it by.
@@ -130,6 +150,12 @@ class TouchSampler:
                 if not len(faces):
                     raise ValueError(f"no STL triangles found on feature {feature.id}")
                 self.faces[feature.id] = faces
+        self.anywhere = None
+        if anywhere:
+            faces = list(faces_from_json(document).values())
+            self.features.update({face.id: face for face in faces})
+            self.drawing = {**self.drawing, **{face.id: face for face in faces}}
+            self.anywhere = (faces, face_owners(mesh, faces))
         # Nominal touches snapped onto the mesh, once: the default plan's positions.
         self.snapped = []
         for entry in self.entries:
@@ -143,6 +169,8 @@ class TouchSampler:
     def fixture_entries(self, rng):
         """Plan entries with their points on the mesh (nominal or random, where the probe touches), fixture
         frame; on an as-built folder, moved from the drawing's features onto the as-built ones."""
+        if self.anywhere is not None:
+            return self._anywhere_entries(rng)
         out = []
         for entry, snapped in zip(self.entries, self.snapped):
             points = snapped
@@ -159,6 +187,26 @@ class TouchSampler:
                 entry = entry_on(entry, modes_of_drawing, coordinates(modes_of_drawing, self.features[entry["feature"]]))
             out.append(entry)
         return out
+
+    def _anywhere_entries(self, rng):
+        """The plan's sensors, and as many point touches as it has drawn by area on the whole mesh where a
+        probe along the face's normal reaches, by the face they lie on."""
+        faces, owner = self.anywhere
+        count = sum(len(np.reshape(e["points"], (-1, 3))) for e in self.entries if "sensor" not in e)
+        points, on = np.zeros((0, 3)), np.zeros(0, int)
+        for _ in range(20):
+            more, pick = drawn_on_faces(self.mesh, np.arange(len(owner)), 4 * count, rng)
+            face = owner[pick]
+            normals = np.array([faces[k].normal_at(p[None])[0] for k, p in zip(face, more)])
+            keep = reachable(self.mesh.triangles, more, normals, self.ball_radius_mm)
+            points, on = np.vstack([points, more[keep]]), np.concatenate([on, face[keep]])
+            if len(points) >= count:
+                break
+        else:
+            raise ValueError("a probe reaches too little of the part to sample touches anywhere on it")
+        points, on = points[:count], on[:count]
+        return [e for e in self.entries if "sensor" in e] + [
+            {"feature": faces[k].id, "points": points[on == k].tolist()} for k in np.unique(on)]
 
     def _centres(self, entry, printed):
         """A ball tip's entry with its centres: its radius out from the touched points, along the normal of

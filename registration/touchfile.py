@@ -415,7 +415,7 @@ def check_enough(features, touches, contacts, ball_radius_mm):
 
 def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=SENSOR_LEVER_MM,
                   ball_radius_mm=None, fixture_tolerance_mm=None, target_sigma=None, units=None, size=(None, None),
-                  unlabelled=False):
+                  unlabelled=False, anywhere=False):
     """Check the options, read a touch file and register it; the result names every touch's row
     (``rows``, in the engine's touch order) and each flagged touch's.
 
@@ -424,7 +424,8 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
     (mm^3), either None, to tell touches in another unit (:mod:`.units`). The result has ``next_touch``
     (see ``register_touches``). Errors are one-line ``ValueError``: touches whose spread says they are in
     another unit, or ball centres registered as points. ``unlabelled``: take every point touch as
-    unlabelled, its feature not said.
+    unlabelled, its feature not said; ``anywhere``: the unlabelled touches lie anywhere on the part, not only on
+    its sensing features (``register`` takes ``anywhere=True``).
     """
     if not 0 < sigma_mm < np.inf:
         raise ValueError(f"--sigma must be a positive number of mm, got {sigma_mm}")
@@ -448,6 +449,9 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
         touches = {None: np.concatenate([v for key, v in touches.items() if key is not None]
                                         + ([touches[None]] if None in touches else []))}
         approaches = {}
+    if anywhere and None not in touches:
+        raise ValueError("--anywhere places unlabelled touches: the file has none (an empty feature, null in JSON, "
+                         "or --unlabelled)")
     check_enough(features, touches, contacts, radius)
     points = [*touches.values(), *(np.reshape(c["point"], (1, 3)) for c in contacts if "point" in c)]
     # An unlabelled touch may lie on any surface: its spread is compared with all of them.
@@ -462,6 +466,8 @@ def register_file(features, register, path, sigma_mm=DEFAULT_SIGMA_MM, lever_mm=
                    fixture_tolerance_mm=fixture_tolerance_mm)
     if free is not None:
         options["unlabelled"] = free
+    if anywhere:
+        options["anywhere"] = True
     result = register(touches, ball_radius_mm=radius, plan_next=True, target_sigma=target_sigma, **options)
     if radius == 0 and not contacts and free is None:
         _check_not_ball_centres(features, register, touches, result, options)
@@ -645,13 +651,15 @@ def main(features, register, argv=None, prog="register.py", default_sigma_mm=DEF
                         help="accuracy wanted: RMS rotation standard deviation, deg")
     parser.add_argument("--unlabelled", action="store_true",
                         help="take every point touch as unlabelled: on some plane, sphere or cylinder, not said which")
+    parser.add_argument("--anywhere", action="store_true",
+                        help="the unlabelled touches lie anywhere on the part, not only on its sensing features")
     args = parser.parse_args(argv)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # a user sees the result and one-line errors, never Python warnings
             result = register_file(features, register, args.touches, args.sigma, args.lever, args.ball_radius,
                                    args.fixture_tolerance, target(args.target_sigma, args.target_sigma_deg),
-                                   args.units, size, args.unlabelled)
+                                   args.units, size, args.unlabelled, args.anywhere)
     except ValueError as error:
         print(f"{prog}: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2

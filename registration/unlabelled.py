@@ -1,7 +1,7 @@
 """Unlabelled touches: every pose that passes under some assignment of the touches to the features.
 
 A touch without a label is a point (or ball) touch on some surface feature's patch: a plane, a sphere or a
-cylinder. The assignments the touches' own shape admits, whatever the pose (:mod:`.assignments`), hold every
+cylinder (the sensing features, or with ``--anywhere`` every face of the part, features.json's ``faces``). The assignments the touches' own shape admits, whatever the pose (:mod:`.assignments`), hold every
 assignment under which a pose passes; the labelled search (:mod:`.search`) finds every pose that passes under
 each. So every pose that passes under some assignment is found under that assignment, with the labelled
 search's guarantee.
@@ -23,6 +23,7 @@ from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
 
 LOCAL_ROUNDS = 2  # a search that stops: each touch put on its nearest feature this many times from each start
+MAX_SEARCHED = 4000  # assignments searched at most, each by the labelled search (3-20 ms): past that it stops
 
 
 def assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma, lever, tolerance, made=None):
@@ -61,8 +62,9 @@ def check_unlabelled(points):
     return points
 
 
-def _surfaces(features):
-    surfaces = [f for f in features.values() if f.surface]  # what an unlabelled touch may lie on
+def surface_features(features):
+    """The features an unlabelled touch may lie on: the planes, spheres and cylinders."""
+    surfaces = [f for f in features.values() if f.surface]
     if not surfaces:
         raise ValueError("an unlabelled touch needs a plane, a sphere or a cylinder to lie on: the fixture has none")
     return surfaces
@@ -77,10 +79,9 @@ def _distances(surfaces, points, rotation, translation, ball_radius_mm):
     return distance, inside
 
 
-def nearest_assignment(features, points, initial_pose, ball_radius_mm=0.0):
-    """Each touch's feature near a nominal pose (4, 4): the nearest surface whose patch it lies on (the nearest
-    of all when it lies on none)."""
-    surfaces = _surfaces(features)
+def nearest_assignment(surfaces, points, initial_pose, ball_radius_mm=0.0):
+    """Each touch's feature near a nominal pose (4, 4): the nearest of the ``surfaces`` whose patch it lies on
+    (the nearest of all when it lies on none)."""
     pose = np.asarray(initial_pose, dtype=np.float64)
     distance, inside = _distances(surfaces, points, pose[:3, :3], pose[:3, 3], ball_radius_mm)
     distance = np.abs(distance)
@@ -98,16 +99,16 @@ def assigned(features, solution, points, index, ball_radius_mm=0.0):
             for i, fid, p in zip(index, solution.assignment, local)]
 
 
-def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_mm=DEFAULT_SIGMA_MM,
+def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0.0, sigma_mm=DEFAULT_SIGMA_MM,
                      lever_mm=SENSOR_LEVER_MM, tolerance=None):
     """Every pose that passes under some assignment of the unlabelled ``points`` (n, 3), mm, measurement
-    frame, numbered ``index`` (n,), to the surface features, beside the labelled touch ``groups``: a
-    :class:`.solve.Solutions`, best first, each solution with its ``assignment`` (a feature id per unlabelled
-    touch) and its labelled ``problem``; ``search`` as :func:`.solve.solve` says it (``complete`` only when
-    the assignments were told and the labelled search under each is complete); ``cells``: the assignments
-    kept per touch."""
+    frame, numbered ``index`` (n,), to the ``surfaces`` (features, all of them in ``features`` by id), beside
+    the labelled touch ``groups``: a :class:`.solve.Solutions`, best first, each solution with its
+    ``assignment`` (a feature id per unlabelled touch) and its labelled ``problem``; ``search`` as
+    :func:`.solve.solve` says it (``complete`` only when the assignments were told, no more than
+    ``MAX_SEARCHED``, and the labelled search under each is complete); ``cells``: the assignments kept per
+    touch."""
     points, index = np.asarray(points, dtype=np.float64).reshape(-1, 3), np.asarray(index)
-    surfaces = _surfaces(features)
     made = {}
 
     def problem_of(assignment):
@@ -120,16 +121,24 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
         ""); the assignments kept per touch."""
         leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance,
                                         threshold / sigma_mm**2, float(np.sqrt(threshold)))
-        found = []
+        if len(leaves) > MAX_SEARCHED:
+            leaves, reason = [], f"the touches fit {len(leaves)} assignments, more than the {MAX_SEARCHED} searched"
+        trees = []
         for leaf in leaves:
             assignment = np.full(len(points), None, dtype=object)
             assignment[keep] = leaf
             assignment = tuple(assignment)
             problem = problem_of(assignment)
-            tree, left = stand_in_tree(problem, threshold)
+            trees.append((assignment, problem, *stand_in_tree(problem, threshold)))
+        found, loose = [], False
+        # The assignments that fix a pose first: one that does not and leaves a region makes the search incomplete,
+        # and the others that do not (a continuum each, slow to search) can then change nothing that is proven.
+        for assignment, problem, tree, left in sorted(trees, key=lambda item: not item[2].fixes_pose):
+            if loose and not tree.fixes_pose:
+                break
             regions = tree.regions(partial=left > 0)
             if not tree.fixes_pose and (regions.poses or not regions.complete):
-                regions.complete = False
+                regions.complete, loose = False, True
                 regions.reason = "the touches fit an assignment of them that does not fix a pose"
             if regions.poses or not regions.complete:
                 found.append((assignment, problem, regions))
@@ -152,7 +161,7 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
             for R, t in regions.poses:
                 pose = np.eye(4)
                 pose[:3, :3], pose[:3, 3] = R, t
-                full = assignment[:i] + nearest_assignment(features, points[i:i + 1], pose, ball_radius_mm) \
+                full = assignment[:i] + nearest_assignment(surfaces, points[i:i + 1], pose, ball_radius_mm) \
                     + assignment[i + 1:]
                 found += _solved(problem_of(full), full, out, initial_pose=pose)
         if found:
@@ -168,7 +177,7 @@ def solve_unlabelled(groups, features, points, index, ball_radius_mm=0.0, sigma_
             pose = np.eye(4)
             pose[:3, :3], pose[:3, 3] = Rk, centroid - Rk @ middle
             for _ in range(LOCAL_ROUNDS):
-                assignment = nearest_assignment(features, points, pose, ball_radius_mm)
+                assignment = nearest_assignment(surfaces, points, pose, ball_radius_mm)
                 solutions = _solved(problem_of(assignment), assignment, out, initial_pose=pose)
                 pose = solutions[0].fixture2meas
             found += solutions

@@ -117,6 +117,37 @@ def _counts(counts):
     return lambda features, rng: _on_patch(features, counts, rng)
 
 
+@functools.lru_cache(maxsize=None)
+def _faces(template):
+    """Every face of the template's solid as a feature (features.json's ``faces``), by id, and each face's
+    triangles (m, 3, 3) of its tessellation."""
+    from fixturecad.cad.faces import FACE_CHORD_MM, face_features
+    from fixturecad.cad.mesh import triangulate
+    from fixturecad.cad.solid import fixture_solid
+
+    shape = fixture_solid(_fixture(template))
+    faces, _ = face_features(shape)
+    return {f.id: f for f in faces}, [nodes[triangles] for _, nodes, triangles in triangulate(shape, FACE_CHORD_MM)]
+
+
+def _anywhere(template, count):
+    """``count`` touches uniform by area anywhere on the solid (its faces' triangles, put on the face's surface),
+    by the face each lies on."""
+    def draw(features, rng):
+        triangles = _faces(template)[1]
+        face = np.concatenate([np.full(len(t), k) for k, t in enumerate(triangles)])
+        triangles = np.concatenate(triangles)
+        a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+        area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        pick = rng.choice(len(triangles), count, p=area / area.sum())
+        u, v = rng.random((2, count))
+        u, v = np.where(u + v > 1, 1 - u, u), np.where(u + v > 1, 1 - v, v)
+        points = a[pick] + u[:, None] * (b - a)[pick] + v[:, None] * (c - a)[pick]
+        ids = list(features)
+        return {ids[k]: features[ids[k]].closest_point(points[face[pick] == k]) for k in np.unique(face[pick])}
+    return draw
+
+
 @dataclass(frozen=True)
 class Case:
     """A kind of layout: its template, the noise levels it runs at (mm) and how its touches are drawn
@@ -130,6 +161,7 @@ class Case:
     printed: bool = False  # registered on a printed part: the fixture's recorded tolerance, as register.py does
     unlabelled: bool = False  # the touches given without their features, to the engine and the brute force
     symmetric: bool = False  # its poses are images of one another under the fixture's symmetry: none separates them
+    anywhere: bool = False  # unlabelled touches anywhere on the solid: its faces are the features, on both sides
 
 
 CASES = [
@@ -204,6 +236,12 @@ CASES = [
     Case("inclined-plane-cylinder 6+8", "inclined-plane-cylinder", (0.0, SIGMA_MM), _counts({"plane": 6, "cylinder": 8})),
     Case("inclined-plane-cylinder 6+8, printed", "inclined-plane-cylinder", (0.0, SIGMA_MM),
          _counts({"plane": 6, "cylinder": 8}), printed=True),
+    # Twelve unlabelled touches anywhere on the solid (--anywhere): every face may hold each. (The quarter-sphere's
+    # poses are the half turn that swaps its flats: none separates them.)
+    Case("quarter-sphere 12 anywhere", "quarter-sphere", (SIGMA_MM,), _anywhere("quarter-sphere", 12),
+         unlabelled=True, symmetric=True, anywhere=True),
+    Case("inclined-plane-cylinder 12 anywhere", "inclined-plane-cylinder", (SIGMA_MM,),
+         _anywhere("inclined-plane-cylinder", 12), unlabelled=True, anywhere=True),
 ]
 VARIANTS = [(case, noise) for case in CASES for noise in case.noise_mm]
 
@@ -226,7 +264,7 @@ class Layout:
 def layout(case, noise_mm, index):
     """The seeded layout ``index`` of a case at a noise level."""
     rng = np.random.default_rng([zlib.crc32(case.name.encode()), int(noise_mm * 1e6), index])
-    features = _features(case.template)
+    features = _faces(case.template)[0] if case.anywhere else _features(case.template)
     truth = np.eye(4)
     truth[:3, :3] = random_rotations(rng, 1)[0]
     truth[:3, 3] = rng.uniform(-TRUE_POSE_RANGE_MM, TRUE_POSE_RANGE_MM, 3)
@@ -295,6 +333,8 @@ def judge(case, noise_mm, index, timed=False):
     given = lay.touches
     if case.unlabelled:
         given, kwargs["unlabelled"] = {}, np.vstack(list(lay.touches.values()))
+    if case.anywhere:
+        kwargs["faces"] = lay.features
     seconds = {}
     clock = time.process_time()
     result = register_touches(lay.features, given, **kwargs)
