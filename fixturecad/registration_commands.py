@@ -174,7 +174,7 @@ def simulate(
     # than the first.
     start = time.perf_counter()
     _trial(routine, sampler, np.random.default_rng([seed, 1]), noise, sigma, nominal, lever, fixture_tolerance,
-           unlabelled, anywhere)
+           unlabelled)
     one = time.perf_counter() - start
     predicted = one * trials
     if predicted > ANNOUNCED_S:
@@ -183,8 +183,7 @@ def simulate(
     records = []
     with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
         for _ in bar:
-            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance, unlabelled,
-                                  anywhere))
+            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance, unlabelled))
     summary = summarise(records, noise)
     summary.update({"trials": trials, "unlabelled": unlabelled, "anywhere": anywhere, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,
@@ -221,7 +220,7 @@ def _progress_stream():
     return sys.stderr if sys.stderr.isatty() else io.StringIO()
 
 
-def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled=False, anywhere=False):
+def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled=False):
     """One registration of fresh synthetic touches: errors, status and the Cramer-Rao bound.
 
     On a printed part (``sampler.tolerance``), also the errors of a perfect
@@ -229,20 +228,18 @@ def _trial(routine, sampler, rng, noise, sigma, nominal, lever, zone, unlabelled
     registered from a nominal pose near the truth, since they split the error
     of the right pose (what the search finds is the first registration's).
     """
-    labels = unlabelled, anywhere
-    record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, True, labels)
+    record = _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, True, unlabelled)
     if sampler.tolerance is not None:
-        alone = _registration(routine, sampler, rng, noise, sigma, True, lever, zone, False, labels, False)
-        part = _registration(routine, sampler, rng, 0.0, sigma, True, lever, zone, True, labels, False)
+        alone = _registration(routine, sampler, rng, noise, sigma, True, lever, zone, False, unlabelled, False)
+        part = _registration(routine, sampler, rng, 0.0, sigma, True, lever, zone, True, unlabelled, False)
         record.update({f"noise_only_{key}": alone[key] for key in ("translation_error_mm", "rotation_error_deg")})
         record.update({f"fixture_only_{key}": part[key] for key in ("translation_error_mm", "rotation_error_deg")})
     return record
 
 
-def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed, labels, bounds=True):
+def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, printed, unlabelled, bounds=True):
     """One registration of fresh touches: its status, errors and time, and (``bounds``) the Cramer-Rao bounds of
-    its touches, on the part and on a perfect one. ``labels``: (unlabelled, anywhere)."""
-    unlabelled, anywhere = labels
+    its touches, on the part and on a perfect one."""
     import time
 
     import numpy as np
@@ -266,7 +263,7 @@ def _registration(routine, sampler, rng, noise, sigma, nominal, lever, zone, pri
     start = time.perf_counter()
     # Unlabelled: the point touches without their features (the routine's numbering: after the contacts).
     given = {"touches": {}, "unlabelled": np.concatenate(list(touches.values()))} if unlabelled else {"touches": touches}
-    if anywhere:
+    if sampler.anywhere is not None:  # drawn anywhere on the part: registered on any face
         given["anywhere"] = True
     result = routine.register(**given, initial_pose=initial, sigma_mm=sigma, ball_radius_mm=sampler.ball_radius_mm,
                               contacts=contacts, lever_mm=lever, fixture_tolerance_mm=zone)
