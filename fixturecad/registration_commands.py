@@ -305,7 +305,8 @@ def _unit(rng):
 
 def summarise(records, noise):
     """Median, 95th percentile and RMS of the errors (of the trials that gave a pose), success rate, ratio of
-    RMS error to the bound."""
+    RMS error to the bound over the trials that call their pose unique (an ambiguous trial's pose may be another
+    that fits as well, an underdetermined one's is not claimed)."""
     import numpy as np
 
     et = np.array([r["translation_error_mm"] for r in records])
@@ -323,6 +324,11 @@ def summarise(records, noise):
         statuses[r["status"]] = statuses.get(r["status"], 0) + 1
     rms_t, rms_r = float(np.sqrt(np.nanmean(et**2))), float(np.sqrt(np.nanmean(er**2)))
     crb_t, crb_r = float(np.sqrt(np.nanmean(bt**2))), float(np.sqrt(np.nanmean(br**2)))
+    unique = np.array([r["status"] == "unique" for r in records])
+    ratio = noise > 0 and unique.any()
+    with np.errstate(invalid="ignore"):
+        ratio_t = float(np.sqrt(np.nanmean(et[unique] ** 2) / np.nanmean(bt[unique] ** 2))) if ratio else None
+        ratio_r = float(np.sqrt(np.nanmean(er[unique] ** 2) / np.nanmean(br[unique] ** 2))) if ratio else None
     return {
         "median_translation_error_mm": float(np.nanmedian(et)),
         "p95_translation_error_mm": float(np.nanpercentile(et, 95)),
@@ -332,8 +338,9 @@ def summarise(records, noise):
         "rms_rotation_error_deg": rms_r,
         "crb_translation_mm": crb_t,
         "crb_rotation_deg": crb_r,
-        "ratio_translation_to_crb": rms_t / crb_t if noise > 0 else None,
-        "ratio_rotation_to_crb": rms_r / crb_r if noise > 0 else None,
+        "ratio_translation_to_crb": ratio_t,
+        "ratio_rotation_to_crb": ratio_r,
+        "unique_trials": int(unique.sum()),
         "success_rate": float(success.mean()),
         "statuses": statuses,
         "median_time_ms": float(np.median([r["time_s"] for r in records]) * 1e3),
@@ -362,9 +369,11 @@ def _split(records):
 
 def format_summary(s) -> str:
     ratio = (
-        f"RMS error / Cramer-Rao bound{' (touch noise and fixture)' if s['fixture_tolerance_mm'] is not None else ''}: "
+        f"RMS error / Cramer-Rao bound{' (touch noise and fixture)' if s['fixture_tolerance_mm'] is not None else ''}"
+        f" over the {s['unique_trials']} unique trials: "
         f"translation {s['ratio_translation_to_crb']:.3f}, rotation {s['ratio_rotation_to_crb']:.3f}"
-        if s["ratio_translation_to_crb"] is not None else "noise 0: no Cramer-Rao ratio"
+        if s["ratio_translation_to_crb"] is not None
+        else "noise 0: no Cramer-Rao ratio" if s["noise_mm"] == 0 else "no unique trial: no Cramer-Rao ratio"
     )
     return "\n".join([
         f"trials: {s['trials']}  noise: {s['noise_mm']} mm  plan: {s['plan']} ({s['touch_plan']})",

@@ -45,11 +45,13 @@ CHUNK = 4096  # rows tested at once against the quads
 SLACK = 1e-9  # relative: rounding kept on the tests' side
 
 
-def admitted(groups, surfaces, points, ball_radius_mm, tolerance, q, root):
+def admitted(groups, surfaces, points, ball_radius_mm, tolerance, q, root, group=()):
     """Every assignment of the unlabelled ``points`` (n, 3), mm, to the ``surfaces`` that the touches' shape
     admits beside the labelled point and ball touches of ``groups``, as tuples of feature ids; the reason when
     the tree stopped (else ""); the assignments kept per touch. ``q``: the test's threshold over sigma^2 (for
-    the deviation bounds); ``root``: its square root in mm."""
+    the deviation bounds); ``root``: its square root in mm. ``group``: the surfaces' symmetries, each a map
+    {id: image id} (:mod:`.symmetry`): of each orbit of assignments only the least is kept (a pose passes under
+    one of an orbit where it passes under all, turned; see :func:`least_of_orbits`)."""
     places, slots = [], []
     for g in groups:
         if g.points is None:
@@ -67,14 +69,31 @@ def admitted(groups, surfaces, points, ball_radius_mm, tolerance, q, root):
     tables = Tables([features[fid] for fid, _ in elements], np.array([o for _, o in elements]), places,
                     tolerance, q, root)
     labelled = len(places) - len(points)
+    index = {element: k for k, element in enumerate(elements)}
+    turns = [np.array([index[(to[fid], offset)] for fid, offset in elements]) for to in group]
     rows, kept = np.zeros((1, 0), int), []
     for choices in options:
-        rows = tables.extend(rows, choices)
+        rows = least_of_orbits(tables.extend(rows, choices), turns)
         kept.append(len(rows))
         if len(rows) > MAX_ROWS:
             return [], f"the touches' features were not told within {MAX_ROWS} assignments", kept
     rows = tables.on_axes(rows)
     return [tuple(elements[k][0] for k in row[labelled:]) for row in rows], "", kept
+
+
+def least_of_orbits(rows, turns):
+    """The rows (assignments of the first touches, element indices) that no symmetry (``turns``: each an
+    element's image index) turns into a row that comes first, lexicographically. A symmetry turns a whole
+    assignment that passes into one that passes, and the least of an orbit has the least prefixes of its orbit
+    too (a prefix that comes later than an image's would put the whole after that image), so every orbit keeps
+    its least assignment through the tree."""
+    keep = np.ones(len(rows), bool)
+    at = np.arange(len(rows))
+    for turn in turns:
+        image = turn[rows]
+        first = np.argmax(image != rows, axis=1)  # where they first differ (0 where they do not)
+        keep &= ~(image[at, first] < rows[at, first])
+    return rows[keep]
 
 
 class Tables:
@@ -223,16 +242,31 @@ def fit_an_axis(sets, radius, reach):
 def _axis_cells(points, mask, far, a0, beta, radius, reach):
     """The cells (K) of :func:`fit_an_axis` that may hold an axis: touches (K, M, 3) about their centroid,
     ``mask`` the real ones, their distances from it (K, M), each cell's middle direction a0 (K, 3), and the
-    cells' radius beta (rad)."""
+    cells' radius beta (rad). Two parallelograms hold c', each from three touches: those farthest apart across
+    a0, and those farthest apart for how wide their ranges are (the touches nearest the centroid along a0, whose
+    ranges a tilt widens least); a cell either one rules out fails."""
     q = points @ np.stack(perpendicular_basis(a0), axis=2)  # (K, M, 2)
     lo, hi = axis_ranges(points, far, a0, beta, radius, reach)
     rows = np.arange(len(q))
     sq = q[..., 0] ** 2 + q[..., 1] ** 2
-    i0 = np.argmax(np.where(mask, sq, -np.inf), axis=1)
+    width = np.where(mask, hi - lo, np.inf)
+    fits = np.ones(len(q), bool)
+    for i0, weight in ((np.argmax(np.where(mask, sq, -np.inf), axis=1), np.ones_like(width)),
+                       (np.argmin(width, axis=1), width + width[rows, np.argmin(width, axis=1)][:, None])):
+        d = q - q[rows, i0][:, None]
+        i1 = np.argmax(np.where(mask, np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) / weight, -np.inf), axis=1)
+        off_line = d[..., 0] * d[rows, i1][:, None, 1] - d[..., 1] * d[rows, i1][:, None, 0]
+        i2 = np.argmax(np.where(mask, np.abs(off_line) / weight, -np.inf), axis=1)
+        fits &= _parallelogram_fits(q, sq, mask, lo, hi, (i0, i1, i2), radius, reach)
+    return fits
+
+
+def _parallelogram_fits(q, sq, mask, lo, hi, triple, radius, reach):
+    """Whether the parallelogram that touches ``triple`` (each (K,)) hold c' in (:func:`fit_an_axis`) leaves
+    every touch's range met and c' within ``R + r`` of the centroid (True where it is too thin to solve)."""
+    rows = np.arange(len(q))
+    i0, i1, i2 = triple
     d = q - q[rows, i0][:, None]
-    i1 = np.argmax(np.where(mask, d[..., 0] ** 2 + d[..., 1] ** 2, -np.inf), axis=1)
-    off_line = d[..., 0] * d[rows, i1][:, None, 1] - d[..., 1] * d[rows, i1][:, None, 0]
-    i2 = np.argmax(np.where(mask, np.abs(off_line), -np.inf), axis=1)
     normals = np.stack([d[rows, i1], d[rows, i2]], axis=1)  # (K, 2, 2): n_i = q_i - q_0
     base = (sq[rows, [i1, i2]].T - sq[rows, i0][:, None])  # |q_i|^2 - |q_0|^2, (K, 2)
     low = 0.5 * (base - hi[rows, [i1, i2]].T ** 2 + lo[rows, i0][:, None] ** 2)

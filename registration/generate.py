@@ -18,7 +18,7 @@ TEMPLATE_NAME = "register.py.tmpl"
 # The registration modules register.py carries, loaded on import from its own copy of their sources.
 EMBEDDED_MODULES = ("ambiguity", "assignments", "contacts", "controllers", "datums", "defaults", "deviations", "elements", "engine", "features",
                     "fits", "least_squares", "mobility", "motions", "noise", "patches", "planning", "pose", "problem", "redundancy", "search", "sensor_bounds", "solve", "stand_ins",
-                    "starts", "tolerance", "touches", "touchfile", "uncertainty", "units", "unlabelled", "verdict")
+                    "starts", "symmetry", "tolerance", "touches", "touchfile", "uncertainty", "units", "unlabelled", "verdict")
 
 
 def _sources():

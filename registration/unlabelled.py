@@ -10,6 +10,8 @@ This module imports numpy only and nothing of fixturecad: it is inlined into the
 ``register.py``.
 """
 
+import dataclasses
+
 import numpy as np
 
 from .assignments import admitted
@@ -19,6 +21,7 @@ from .pose import rotation_from_vector
 from .problem import Problem
 from .search import first_cells, stand_in_tree, threshold_mm2
 from .solve import Solutions, solve, told_apart
+from .symmetry import symmetries
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
 
@@ -120,7 +123,7 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
         search leaves a region, with its problem and regions; the reason the assignments were not told (else
         ""); the assignments kept per touch."""
         leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance,
-                                        threshold / sigma_mm**2, float(np.sqrt(threshold)))
+                                        threshold / sigma_mm**2, float(np.sqrt(threshold)), [to for *_, to in group])
         if len(leaves) > MAX_SEARCHED:
             leaves, reason = [], f"the touches fit {len(leaves)} assignments, more than the {MAX_SEARCHED} searched"
         trees = []
@@ -130,19 +133,36 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
             assignment = tuple(assignment)
             problem = problem_of(assignment)
             trees.append((assignment, problem, *stand_in_tree(problem, threshold)))
-        found, loose = [], False
+        found, loose, regions_of = [], False, {}
         # The assignments that fix a pose first: one that does not and leaves a region makes the search incomplete,
         # and the others that do not (a continuum each, slow to search) can then change nothing that is proven.
-        for assignment, problem, tree, left in sorted(trees, key=lambda item: not item[2].fixes_pose):
+        for k in sorted(range(len(trees)), key=lambda k: not trees[k][2].fixes_pose):
+            assignment, problem, tree, left = trees[k]
             if loose and not tree.fixes_pose:
                 break
-            regions = tree.regions(partial=left > 0)
+            regions = regions_of[k] = tree.regions(partial=left > 0)
             if not tree.fixes_pose and (regions.poses or not regions.complete):
                 regions.complete, loose = False, True
                 regions.reason = "the touches fit an assignment of them that does not fix a pose"
             if regions.poses or not regions.complete:
                 found.append((assignment, problem, regions))
+        for k, regions in regions_of.items():
+            if not (regions.poses or not regions.complete):
+                continue
+            # Each symmetry S turns the orbit's least assignment A into pi(A): its touches lie on pi(A) at P S^-1
+            # (x -> R_P R^T (x - t) + t_P) as on A at P.
+            taken = {trees[k][0]}
+            for R, t, to in group:
+                image = tuple(None if f is None else to[f] for f in trees[k][0])
+                if image not in taken:
+                    taken.add(image)
+                    poses = [(Rp @ R.T, tp - Rp @ R.T @ t) for Rp, tp in regions.poses]
+                    found.append((image, problem_of(image), dataclasses.replace(regions, poses=poses)))
         return found, reason, kept
+
+    # The surfaces' symmetries turn one assignment's poses into another's: only where nothing else (labelled
+    # touches, sensors, a printed part's deviations, each tied to its own feature) tells the surfaces apart.
+    group = symmetries(surfaces) if not groups and tolerance is None else []
 
     # Every surface gives a point touch one row: the test's threshold is the same under every assignment.
     threshold = threshold_mm2(problem_of([surfaces[0].id] * len(points)))
