@@ -325,10 +325,13 @@ def summarise(records, noise):
     rms_t, rms_r = float(np.sqrt(np.nanmean(et**2))), float(np.sqrt(np.nanmean(er**2)))
     crb_t, crb_r = float(np.sqrt(np.nanmean(bt**2))), float(np.sqrt(np.nanmean(br**2)))
     unique = np.array([r["status"] == "unique" for r in records])
+
+    def unique_rms(values):
+        return float(np.sqrt(np.nanmean(values[unique] ** 2))) if unique.any() else None
+
+    on_unique = {"unique_rms_translation_error_mm": unique_rms(et), "unique_rms_rotation_error_deg": unique_rms(er),
+                 "unique_crb_translation_mm": unique_rms(bt), "unique_crb_rotation_deg": unique_rms(br)}
     ratio = noise > 0 and unique.any()
-    with np.errstate(invalid="ignore"):
-        ratio_t = float(np.sqrt(np.nanmean(et[unique] ** 2) / np.nanmean(bt[unique] ** 2))) if ratio else None
-        ratio_r = float(np.sqrt(np.nanmean(er[unique] ** 2) / np.nanmean(br[unique] ** 2))) if ratio else None
     return {
         "median_translation_error_mm": float(np.nanmedian(et)),
         "p95_translation_error_mm": float(np.nanpercentile(et, 95)),
@@ -338,9 +341,12 @@ def summarise(records, noise):
         "rms_rotation_error_deg": rms_r,
         "crb_translation_mm": crb_t,
         "crb_rotation_deg": crb_r,
-        "ratio_translation_to_crb": ratio_t,
-        "ratio_rotation_to_crb": ratio_r,
         "unique_trials": int(unique.sum()),
+        **on_unique,
+        "ratio_translation_to_crb": on_unique["unique_rms_translation_error_mm"] / on_unique["unique_crb_translation_mm"]
+        if ratio else None,
+        "ratio_rotation_to_crb": on_unique["unique_rms_rotation_error_deg"] / on_unique["unique_crb_rotation_deg"]
+        if ratio else None,
         "success_rate": float(success.mean()),
         "statuses": statuses,
         "median_time_ms": float(np.median([r["time_s"] for r in records]) * 1e3),
@@ -423,7 +429,8 @@ def _plot_assignment(ax, assigned):
 
 
 def plot_errors(records, summary, path: Path) -> None:
-    """Histograms of the translation and rotation errors with the RMS bound marked."""
+    """Histograms of the translation and rotation errors with the RMS bound marked: of the trials that call their
+    pose unique where there are any (an ambiguous or underdetermined trial's pose is not claimed)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -437,6 +444,11 @@ def plot_errors(records, summary, path: Path) -> None:
         ("translation_error_mm", 1e3, "translation error (um)", "crb_translation_mm", "rms_translation_error_mm"),
         ("rotation_error_deg", 1e3, "rotation error (mdeg)", "crb_rotation_deg", "rms_rotation_error_deg"),
     ]
+    some = 0 < summary["unique_trials"] < summary["trials"]
+    if summary["unique_trials"]:
+        records = [r for r in records if r["status"] == "unique"]
+        panels = [(key, scale, label + (f", the {summary['unique_trials']} unique trials" if some else ""),
+                   f"unique_{bound}", f"unique_{rms}") for key, scale, label, bound, rms in panels]
     for ax, (key, scale, label, bound, rms) in zip(axes, panels):
         values = np.array([r[key] for r in records]) * scale
         ax.hist(values, bins=40, color="0.7")

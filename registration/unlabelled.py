@@ -118,6 +118,19 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
         return assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
                                 tolerance, made)
 
+    def turned(assignment, regions):
+        """The orbit of an assignment A under the symmetries (a group: :func:`.symmetry.symmetries`), A itself
+        left out: each S (x -> R x + t) turns A into pi(A), whose touches lie on pi(A) at P S^-1 (x -> R_P R^T
+        (x - t) + t_P) as on A at P."""
+        out, taken = [], {assignment}
+        for R, t, to in group:
+            image = tuple(None if f is None else to[f] for f in assignment)
+            if image not in taken:
+                taken.add(image)
+                poses = [(Rp @ R.T, tp - Rp @ R.T @ t) for Rp, tp in regions.poses]
+                out.append((image, problem_of(image), dataclasses.replace(regions, poses=poses)))
+        return out
+
     def searched(keep):
         """Each admitted assignment of the touches ``keep`` (a mask; the others left out, None in it) whose
         search leaves a region, with its problem and regions; the reason the assignments were not told (else
@@ -133,31 +146,19 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
             assignment = tuple(assignment)
             problem = problem_of(assignment)
             trees.append((assignment, problem, *stand_in_tree(problem, threshold)))
-        found, loose, regions_of = [], False, {}
+        found, loose = [], False
         # The assignments that fix a pose first: one that does not and leaves a region makes the search incomplete,
         # and the others that do not (a continuum each, slow to search) can then change nothing that is proven.
-        for k in sorted(range(len(trees)), key=lambda k: not trees[k][2].fixes_pose):
-            assignment, problem, tree, left = trees[k]
+        for assignment, problem, tree, left in sorted(trees, key=lambda item: not item[2].fixes_pose):
             if loose and not tree.fixes_pose:
                 break
-            regions = regions_of[k] = tree.regions(partial=left > 0)
+            regions = tree.regions(partial=left > 0)
             if not tree.fixes_pose and (regions.poses or not regions.complete):
                 regions.complete, loose = False, True
                 regions.reason = "the touches fit an assignment of them that does not fix a pose"
             if regions.poses or not regions.complete:
                 found.append((assignment, problem, regions))
-        for k, regions in regions_of.items():
-            if not (regions.poses or not regions.complete):
-                continue
-            # Each symmetry S turns the orbit's least assignment A into pi(A): its touches lie on pi(A) at P S^-1
-            # (x -> R_P R^T (x - t) + t_P) as on A at P.
-            taken = {trees[k][0]}
-            for R, t, to in group:
-                image = tuple(None if f is None else to[f] for f in trees[k][0])
-                if image not in taken:
-                    taken.add(image)
-                    poses = [(Rp @ R.T, tp - Rp @ R.T @ t) for Rp, tp in regions.poses]
-                    found.append((image, problem_of(image), dataclasses.replace(regions, poses=poses)))
+                found += turned(assignment, regions)
         return found, reason, kept
 
     # The surfaces' symmetries turn one assignment's poses into another's: only where nothing else (labelled

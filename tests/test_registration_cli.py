@@ -147,3 +147,25 @@ def test_simulate_refuses_bad_options(built):
     assert_bad_input(run("simulate", folder, "--noise", -1), "--noise")
     assert_bad_input(run("simulate", folder, "--lever", 0), "--lever")
     assert_bad_input(run("simulate", folder, "--touch-plan", "nope"), "unknown touch plan 'nope'")
+
+
+def test_simulate_s_ratio_to_the_bound_takes_the_unique_trials_alone():
+    """An ambiguous trial's pose (another that fits as well, far off) and an underdetermined one's unbounded bound
+    stay out of the ratio: RMS error and RMS bound over the same unique trials."""
+    from fixturecad.registration_commands import format_summary, summarise
+
+    def record(status, error_mm, bound_mm):
+        return {"status": status, "translation_error_mm": error_mm, "rotation_error_deg": error_mm,
+                "crb_translation_mm": bound_mm, "crb_rotation_deg": bound_mm, "time_s": 0.01}
+
+    records = [record("unique", 0.003, 0.004), record("unique", 0.005, 0.004), record("ambiguous", 80.0, 0.004),
+               record("underdetermined", 0.1, float("inf"))]
+    s = summarise(records, 0.005)
+    assert s["unique_trials"] == 2
+    assert s["ratio_translation_to_crb"] == pytest.approx(np.sqrt((0.003**2 + 0.005**2) / 2) / 0.004)
+    s.update(trials=4, noise_mm=0.005, plan="default", touch_plan="default", fixture_tolerance_mm=None)
+    assert "over the 2 unique trials" in format_summary(s)
+    s = summarise(records[2:], 0.005)
+    assert s["ratio_translation_to_crb"] is None
+    s.update(trials=2, noise_mm=0.005, plan="default", touch_plan="default", fixture_tolerance_mm=None)
+    assert "no unique trial" in format_summary(s)

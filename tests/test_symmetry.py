@@ -7,6 +7,7 @@ was found from, and the search that takes every assignment.
 """
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -79,3 +80,26 @@ def test_one_assignment_of_each_orbit_finds_what_all_of_them_find(name, counts, 
             assert min(pose_errors(np.array(s["pose"]), np.array(e["pose"]))[0] for e in every["solutions"]) < 1e-4
         truth = fixture2meas_from_rt(R, t)
         assert min(pose_errors(np.array(s["pose"]), truth)[0] for s in taken["solutions"]) < 0.05
+
+
+@pytest.mark.parametrize("name", ["cube", "sphere-plate", "quarter-sphere", "v-block"])
+def test_the_symmetries_found_are_a_group(name):
+    """The search turns each orbit's least assignment by each symmetry once, which reaches the whole orbit only
+    if every product of two symmetries is one of them (or the identity): on the sensing features and on every
+    face of the solid (the cube's 24 turns)."""
+    surfaces = [f for f in features_from_json(build.features_document(templates.make(name))).values() if f.surface]
+    faces = symmetries(list(_faces(name).values()))
+    assert len(faces) == {"cube": 23, "v-block": 1}.get(name, 0)
+    for found in (symmetries(surfaces), faces):
+        motions = [(np.eye(3), np.zeros(3))] + [(R, t) for R, t, _ in found]
+        for (R1, t1), (R2, t2) in itertools.product(motions, motions):
+            R, t = R1 @ R2, R1 @ t2 + t1
+            assert any(np.allclose(R, Rk, atol=1e-7) and np.allclose(t, tk, atol=1e-5) for Rk, tk in motions)
+
+
+def _faces(name):
+    """Every face of the template's solid as a feature (features.json's ``faces``), by id."""
+    cad = pytest.importorskip("fixturecad.cad.faces")
+    from fixturecad.cad.solid import fixture_solid
+
+    return {f.id: f for f in cad.face_features(fixture_solid(templates.make(name)))[0]}
