@@ -38,8 +38,8 @@ from .planning import next_touches
 from .redundancy import redundancy
 from .solve import solve
 from .touches import build_groups
-from .unlabelled import (assigned, assigned_problem, check_unlabelled, nearest_assignment, solve_unlabelled,
-                         surface_features)
+from .unlabelled import (assigned, assigned_problem, check_unlabelled, faces_holding, nearest_assignment,
+                         solve_unlabelled, surface_features)
 from .uncertainty import covariance, covariance_from_information, sigmas
 from .verdict import Solution, judged, same_pose
 
@@ -94,8 +94,8 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     only one touch explains it, else None), ``inadmissible`` (touches off their
     patch or touched from inside at ``pose``), ``touches``, ``rows``, ``rank``,
     ``redundancy`` (how well the touches check each other, :mod:`.redundancy`), ``assignment`` (with
-    unlabelled touches: each one's ``touch``, ``feature`` and ``residual_mm`` at ``pose``; each of
-    ``solutions`` has its own);
+    unlabelled touches: each one's ``touch``, ``feature`` and ``residual_mm`` at ``pose``, and on a face that
+    features lie on, their ids, ``holds``; each of ``solutions`` has its own);
     with no pose, ``rms_residual_mm``, ``inadmissible``, ``rank`` and
     ``redundancy`` are those of the lowest-cost candidate.
     """
@@ -106,6 +106,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     # touches stay on the sensing features, among the candidates).
     surfaces = (surface_features(features) if faces is None else list(faces.values())) if len(points) else []
     planned, features = features, {**features, **(faces or {})}
+    holds = faces_holding(faces, planned) if faces and len(points) else {}
     if len(points) and initial_pose is None:
         solutions = solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm,
                                      tolerance)
@@ -186,7 +187,8 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             "inadmissible": sorted(answer.outside),
             "rms_residual_mm": answer.rms,
             "solutions": [{"pose": s.fixture2meas.tolist(), "rms_residual_mm": s.rms,
-                           **({"assignment": assigned(features, s, points, index, ball_radius_mm)} if len(points) else {})}
+                           **({"assignment": assigned(features, s, points, index, ball_radius_mm, holds)}
+                              if len(points) else {})}
                           for s in shown],
             "covariance": None if cov is None else cov.tolist(),
             "sigma_translation_mm": s_t,
@@ -201,7 +203,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         }
     )
     if len(points):
-        result["assignment"] = assigned(features, answer, points, index, ball_radius_mm)
+        result["assignment"] = assigned(features, answer, points, index, ball_radius_mm, holds)
     if best is None:
         return result  # no pose to plan the next touch or a target from
     if plan_next:

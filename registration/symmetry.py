@@ -90,7 +90,7 @@ def _rows(f, g, R):
     """The rows (A, b) of ``A t = b`` that put f's core turned by R on g's, or None where they cannot meet."""
     core_f, anchor_f, direction_f, radius_f = f.core()
     core_g, anchor_g, direction_g, radius_g = g.core()
-    if core_f != core_g or abs(radius_f - radius_g) > TOL_MM or f.sensing != g.sensing:
+    if core_f != core_g or abs(radius_f - radius_g) > TOL_MM:
         return None
     if core_f == "point":
         return np.eye(3), anchor_g - R @ anchor_f
@@ -132,7 +132,8 @@ def _translations(surfaces, R):
 
 def _images(surfaces, R, t):
     """Each surface's image id under ``x -> R x + t`` where every surface maps onto a distinct one, else None."""
-    cores = {f.id: [g for g in surfaces if g.kind == f.kind and _meets(f, g, R, t)] for f in surfaces}
+    cores = {f.id: [g for g in surfaces if g.kind == f.kind and g.sensing == f.sensing and core_onto(f, g, R, t)]
+             for f in surfaces}
     if not all(cores.values()):
         return None  # a core lands on none: the patches, the costly part, are not compared
     image = {}
@@ -144,8 +145,9 @@ def _images(surfaces, R, t):
     return image if len(set(image.values())) == len(image) else None
 
 
-def _meets(f, g, R, t):
-    """Whether f's core turned by ``x -> R x + t`` is g's."""
+def core_onto(f, g, R=np.eye(3), t=np.zeros(3)):
+    """Whether f's core (its element: a centre, an axis, a plane, and its radius) turned by ``x -> R x + t`` is
+    g's, within the tolerances."""
     rows = _rows(f, g, R)
     return rows is not None and bool(np.all(np.abs(rows[0] @ t - rows[1]) <= TOL_MM))
 

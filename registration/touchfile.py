@@ -561,7 +561,8 @@ def format_result(result, pose_format="matrix"):
         lines.append("pose: none (no single touch, label or printed feature explains the inconsistency)")
     for touch in result.get("assignment", []):
         where = rows[touch["touch"]] if rows else f"touch {touch['touch']}"
-        lines.append(f"assigned: {where} on {touch['feature']} ({touch['residual_mm']:+.4f} mm)")
+        on = touch["feature"] + (f" ({', '.join(touch['holds'])})" if touch.get("holds") else "")
+        lines.append(f"assigned: {where} on {on} ({touch['residual_mm']:+.4f} mm)")
     if len(result["solutions"]) > 1:
         lines.append(f"{len(result['solutions'])} solutions pass the residual test")
     for motion in result["free_motions"]:

@@ -21,7 +21,7 @@ from .pose import rotation_from_vector
 from .problem import Problem
 from .search import first_cells, stand_in_tree, threshold_mm2
 from .solve import Solutions, solve, told_apart
-from .symmetry import symmetries
+from .symmetry import core_onto, symmetries
 from .touches import point_touches
 from .verdict import EXTENT_TOLERANCE_MM, same_pose
 
@@ -93,12 +93,22 @@ def nearest_assignment(surfaces, points, initial_pose, ball_radius_mm=0.0):
     return tuple(surfaces[k].id for k in nearest)
 
 
-def assigned(features, solution, points, index, ball_radius_mm=0.0):
-    """The unlabelled touches' assignment under a solution: each one's ``touch``, ``feature`` and
-    ``residual_mm`` (its signed distance from that feature at the solution's pose)."""
+def faces_holding(faces, features):
+    """For each face (``--anywhere``) that one or more of the ``features`` lie on (the same surface: their cores
+    one, :func:`.symmetry.core_onto`), their ids: a touch put on the face is named by them too."""
+    holds = {f.id: [g.id for g in features.values() if g.kind == f.kind and core_onto(g, f)] for f in faces.values()}
+    return {fid: ids for fid, ids in holds.items() if ids}
+
+
+def assigned(features, solution, points, index, ball_radius_mm=0.0, holds=None):
+    """The unlabelled touches' assignment under a solution: each one's ``touch``, ``feature``, ``residual_mm``
+    (its signed distance from that feature at the solution's pose) and, where the feature is a face that
+    features lie on (``holds``, :func:`faces_holding`), ``holds``: their ids."""
     local = (points - solution.translation) @ solution.rotation
+    holds = holds or {}
     return [{"touch": int(i), "feature": fid,
-             "residual_mm": float(features[fid].signed_distance(p[None])[0] - ball_radius_mm)}
+             "residual_mm": float(features[fid].signed_distance(p[None])[0] - ball_radius_mm),
+             **({"holds": holds[fid]} if fid in holds else {})}
             for i, fid, p in zip(index, solution.assignment, local)]
 
 

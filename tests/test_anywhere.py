@@ -17,6 +17,7 @@ from cli import assert_bad_input, run
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.features import faces_from_json, features_from_json
 from fixturecad.registration.pose import pose_errors
+from fixturecad.registration.unlabelled import faces_holding
 
 cq = pytest.importorskip("cadquery")
 from fixturecad.build import features_document  # noqa: E402
@@ -62,6 +63,11 @@ def test_every_sensing_patch_lies_on_a_face(name):
             if face.kind == feature.kind:
                 on |= (np.abs(face.signed_distance(points)) < 1e-6) & face.contains(points, 0.0)
         assert on.all(), (name, feature.id)
+        # ... and the face a touch is put on names it: the faces whose surface it lies on hold it.
+        holding = [f.id for f in faces if feature.id in faces_holding({f.id: f for f in faces}, {feature.id: feature})
+                   .get(f.id, [])]
+        assert holding and all(np.abs(faces_by_id[k].signed_distance(points)).max() < 1e-6
+                               for faces_by_id in [{f.id: f for f in faces}] for k in holding), (name, feature.id)
 
 
 def test_a_hull_not_grown_leaves_the_face_out():
@@ -132,6 +138,15 @@ def test_register_and_register_py_take_touches_anywhere(built, tmp_path):
         errors = pose_errors(np.array(result["pose"]), truth)
         assert errors[0] < 0.01 and np.degrees(errors[1]) < 0.01
         assert all(a["feature"].startswith("face_") for a in result["assignment"])
+        # A touch on the face that holds the plane or the cylinder is named by it too: it lies on that surface
+        # (within the STL's chord, where the touches were drawn).
+        features = features_from_json(json.loads((folder / "features.json").read_text()))
+        local = (np.loadtxt(csv, delimiter=",", skiprows=1, usecols=(1, 2, 3)) - truth[:3, 3]) @ truth[:3, :3]
+        named = [a for a in result["assignment"] if a.get("holds")]
+        assert named and all(np.abs(features[a["holds"][0]].signed_distance(local[a["touch"]][None]))[0] < 0.02
+                             for a in named)
+    text = run("register", folder, csv, "--anywhere").stdout
+    assert any(line.startswith("assigned:") and "(plane)" in line for line in text.splitlines())
 
 
 def test_anywhere_without_faces_or_unlabelled_touches_is_one_line(built, tmp_path):
