@@ -40,7 +40,7 @@ AXIS_TOUCHES = 5  # a cylinder's or line's touches, this many or more, searched 
 AXIS_CELLS = 4  # the axis search's first cells: this many a side on each of three cube faces ...
 AXIS_LEVELS = 8  # ... split this many times at most (a cell then 0.0014 rad across) ...
 AXIS_KEPT = 2000  # ... while a set keeps at most this many cells (it is taken to fit past either)
-AXIS_PAIRS = 8  # the narrowest cones about the set's pairs' lines that bound the axis search's cells
+AXIS_PAIRS = 36  # the narrowest cones about the set's pairs' lines that bound the axis search's cells (all of nine touches')
 CHUNK = 4096  # rows tested at once against the quads
 SLACK = 1e-9  # relative: rounding kept on the tests' side
 
@@ -250,14 +250,18 @@ def _axis_cells(points, mask, far, a0, beta, radius, reach):
     rows = np.arange(len(q))
     sq = q[..., 0] ** 2 + q[..., 1] ** 2
     width = np.where(mask, hi - lo, np.inf)
+    narrowest = np.argmin(width, axis=1)
     fits = np.ones(len(q), bool)
-    for i0, weight in ((np.argmax(np.where(mask, sq, -np.inf), axis=1), np.ones_like(width)),
-                       (np.argmin(width, axis=1), width + width[rows, np.argmin(width, axis=1)][:, None])):
-        d = q - q[rows, i0][:, None]
-        i1 = np.argmax(np.where(mask, np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) / weight, -np.inf), axis=1)
-        off_line = d[..., 0] * d[rows, i1][:, None, 1] - d[..., 1] * d[rows, i1][:, None, 0]
-        i2 = np.argmax(np.where(mask, np.abs(off_line) / weight, -np.inf), axis=1)
-        fits &= _parallelogram_fits(q, sq, mask, lo, hi, (i0, i1, i2), radius, reach)
+    # The narrow ranges' parallelogram first (it rules out more), the other only on the cells it leaves.
+    for i0, weight in ((narrowest, width + width[rows, narrowest][:, None]),
+                       (np.argmax(np.where(mask, sq, -np.inf), axis=1), np.ones_like(width))):
+        k = np.flatnonzero(fits)
+        at = np.arange(len(k))
+        d = q[k] - q[k, i0[k]][:, None]
+        i1 = np.argmax(np.where(mask[k], np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) / weight[k], -np.inf), axis=1)
+        off_line = d[..., 0] * d[at, i1][:, None, 1] - d[..., 1] * d[at, i1][:, None, 0]
+        i2 = np.argmax(np.where(mask[k], np.abs(off_line) / weight[k], -np.inf), axis=1)
+        fits[k] = _parallelogram_fits(q[k], sq[k], mask[k], lo[k], hi[k], (i0[k], i1, i2), radius, reach)
     return fits
 
 

@@ -13,6 +13,7 @@ import pytest
 
 from fixturecad.registration import assignments
 from fixturecad.registration.assignments import admitted
+from fixturecad.registration.elements import perpendicular_basis
 from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation
 from fixturecad.registration.touches import point_touches
@@ -165,8 +166,15 @@ def test_touches_on_a_cylinder_fit_an_axis():
     radius = feature.core()[3]
     assert assignments.fit_an_axis(sets, radius, REACH_MM).all()
     _, anchor, axis, _ = feature.core()
-    lines = [(anchor + rng.uniform(-60.0, 20.0, (n, 1)) * axis + rng.normal(0.0, REACH_MM / 2, (n, 3)))
-             @ random_rotation(rng).T for n in rng.integers(5, 13, 50)]
+    # Each off the line by up to its reach (a normal draw's tail would put some beyond it: no axis then).
+    across = np.stack(perpendicular_basis(axis))
+
+    def off(n):
+        angle = rng.uniform(0.0, 2.0 * np.pi, n)
+        return REACH_MM * rng.uniform(0.0, 1.0, (n, 1)) * np.column_stack([np.cos(angle), np.sin(angle)]) @ across
+
+    lines = [(anchor + rng.uniform(-60.0, 20.0, (n, 1)) * axis + off(n)) @ random_rotation(rng).T
+             for n in rng.integers(5, 13, 50)]
     assert assignments.fit_an_axis(lines, 0.0, REACH_MM).all()
 
 
