@@ -25,8 +25,8 @@ from .elements import perpendicular_basis
 
 TOL_MM = 1e-6  # two cores, patches or offsets within this are one (a nanometre: rounding of the template's trig)
 TOL = 1e-9  # ... and two unit vectors within this
-_KEPT = {}  # the surfaces' JSON -> their symmetries: a registration asks again for the same fixture's
-KEPT = 64
+_KEPT = {}  # the surfaces' JSON -> their symmetries: each registration of a fixture asks for the same ones
+KEPT = 64  # fixtures' symmetries kept before they are all forgotten
 
 
 def symmetries(surfaces):
@@ -40,6 +40,7 @@ def symmetries(surfaces):
 
 
 def _symmetries(surfaces):
+    """:func:`symmetries`, found (see the module doc): those that move some surface onto another."""
     vectors = _vectors(surfaces)
     base = next(((a, b) for a, b in itertools.combinations(vectors, 2)
                  if np.linalg.norm(np.cross(a[1], b[1])) > 1e-6 * np.linalg.norm(a[1]) * np.linalg.norm(b[1])), None)
