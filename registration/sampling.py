@@ -197,7 +197,9 @@ class TouchSampler:
         for _ in range(20):
             more, pick = drawn_on_faces(self.mesh, np.arange(len(owner)), 4 * count, rng)
             face = owner[pick]
-            normals = np.array([faces[k].normal_at(p[None])[0] for k, p in zip(face, more)])
+            normals = np.zeros_like(more)
+            for k in np.unique(face):
+                normals[face == k] = faces[k].normal_at(more[face == k])
             keep = reachable(self.mesh.triangles, more, normals, self.ball_radius_mm)
             points, on = np.vstack([points, more[keep]]), np.concatenate([on, face[keep]])
             if len(points) >= count:

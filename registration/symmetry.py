@@ -17,26 +17,27 @@ This module imports numpy only and nothing of fixturecad: it is inlined into the
 """
 
 import itertools
-import json
 
 import numpy as np
 
 from .elements import perpendicular_basis
+from .fits import frame_from
 
 TOL_MM = 1e-6  # two cores, patches or offsets within this are one (a nanometre: rounding of the template's trig)
 TOL = 1e-9  # ... and two unit vectors within this
-_KEPT = {}  # the surfaces' JSON -> their symmetries: each registration of a fixture asks for the same ones
+_KEPT = {}  # ids of the surfaces -> (the surfaces, their symmetries): each registration asks for the same ones
 KEPT = 64  # fixtures' symmetries kept before they are all forgotten
 
 
 def symmetries(surfaces):
     """The symmetries of the ``surfaces`` other than the identity: (R (3, 3), t (3,), {id: image id}) each."""
-    key = json.dumps([f.to_json() for f in surfaces], sort_keys=True)
-    if key not in _KEPT:
+    key = tuple(map(id, surfaces))
+    kept = _KEPT.get(key)
+    if kept is None or any(a is not b for a, b in zip(kept[0], surfaces)):
         if len(_KEPT) >= KEPT:
             _KEPT.clear()
-        _KEPT[key] = _symmetries(surfaces)
-    return _KEPT[key]
+        kept = _KEPT[key] = (tuple(surfaces), _symmetries(surfaces))
+    return kept[1]
 
 
 def _symmetries(surfaces):
@@ -53,7 +54,7 @@ def _symmetries(surfaces):
                 or abs(np.linalg.norm(d) - np.linalg.norm(b)) > TOL_MM or abs(c @ d - a @ b) > TOL_MM * (
                     np.linalg.norm(a) + np.linalg.norm(b) + 1.0):
             continue
-        R = _frame(c, d) @ _frame(a, b).T
+        R = frame_from(c / np.linalg.norm(c), d) @ frame_from(a / np.linalg.norm(a), b).T
         for t in _translations(surfaces, R):
             image = _images(surfaces, R, t)
             if image is not None and not any(np.allclose(R, Rk, atol=TOL) and np.allclose(t, tk, atol=TOL_MM)
@@ -77,14 +78,6 @@ def _vectors(surfaces):
         elif core == "line":
             out += [(("axis", radius), direction), (("axis", radius), -direction)]
     return out
-
-
-def _frame(a, b):
-    """The orthonormal frame (columns) of a and b's plane: a's direction, b's part across it, their normal."""
-    e1 = a / np.linalg.norm(a)
-    e2 = b - (b @ e1) * e1
-    e2 = e2 / np.linalg.norm(e2)
-    return np.column_stack([e1, e2, np.cross(e1, e2)])
 
 
 def _rows(f, g, R):
