@@ -449,6 +449,9 @@ def plot_errors(records, summary, path: Path) -> None:
         records = [r for r in records if r["status"] == "unique"]
         panels = [(key, scale, label + (f", the {summary['unique_trials']} unique trials" if some else ""),
                    f"unique_{bound}", f"unique_{rms}") for key, scale, label, bound, rms in panels]
+    else:  # every pose shown is one of several that fit (or one the touches leave weak): not a claimed one
+        panels = [(key, scale, label + ", no unique trial: each one's first pose", bound, rms)
+                  for key, scale, label, bound, rms in panels]
     for ax, (key, scale, label, bound, rms) in zip(axes, panels):
         values = np.array([r[key] for r in records]) * scale
         ax.hist(values, bins=40, color="0.7")
