@@ -35,7 +35,7 @@ from .elements import perpendicular_basis
 from .patches import patch_box
 from .search import contact_offset, deviation_bound, patch_growth
 
-MAX_ROWS = 200_000  # assignments of the touches so far kept at most (memory: rows x touches)
+MAX_ROWS = 20_000  # assignments of the touches so far kept at most: past that the poses tell them (:mod:`.face_search`)
 AXIS_TOUCHES = 5  # a cylinder's or line's touches, this many or more, searched for an axis they fit
 AXIS_CELLS = 4  # the axis search's first cells: this many a side on each of three cube faces ...
 AXIS_LEVELS = 8  # ... split this many times at most (a cell then 0.0014 rad across) ...

@@ -16,7 +16,7 @@ from fixturecad import __version__
 
 TEMPLATE_NAME = "register.py.tmpl"
 # The registration modules register.py carries, loaded on import from its own copy of their sources.
-EMBEDDED_MODULES = ("ambiguity", "assignments", "contacts", "controllers", "datums", "defaults", "deviations", "elements", "engine", "features",
+EMBEDDED_MODULES = ("ambiguity", "assignments", "contacts", "controllers", "datums", "defaults", "deviations", "elements", "engine", "face_search", "features",
                     "fits", "least_squares", "mobility", "motions", "noise", "patches", "planning", "pose", "problem", "redundancy", "search", "sensor_bounds", "solve", "stand_ins",
                     "starts", "symmetry", "tolerance", "touches", "touchfile", "uncertainty", "units", "unlabelled", "verdict")
 

@@ -1,9 +1,10 @@
 """Unlabelled touches: every pose that passes under some assignment of the touches to the features.
 
 A touch without a label is a point (or ball) touch on some surface feature's patch: a plane, a sphere or a
-cylinder (the sensing features, or with ``--anywhere`` every face of the part, features.json's ``faces``). The assignments the touches' own shape admits, whatever the pose (:mod:`.assignments`), hold every
-assignment under which a pose passes; the labelled search (:mod:`.search`) finds every pose that passes under
-each. So every pose that passes under some assignment is found under that assignment, with the labelled
+cylinder (the sensing features, or with ``--anywhere`` every face of the part, features.json's ``faces``). The assignments the touches' own shape admits, whatever the pose (:mod:`.assignments`), or where
+those are too many the poses admit (:mod:`.face_search`), hold every assignment under which a pose passes (or
+one of its orbit under the surfaces' symmetries); the labelled search (:mod:`.search`) finds every pose that
+passes under each. So every pose that passes under some assignment is found under that assignment, with the labelled
 search's guarantee.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into the generated standalone
@@ -15,6 +16,7 @@ import dataclasses
 import numpy as np
 
 from .assignments import admitted
+from .face_search import face_search
 from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
 from .patches import patch_box
 from .pose import rotation_from_vector
@@ -120,7 +122,7 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
     ``assignment`` (a feature id per unlabelled touch) and its labelled ``problem``; ``search`` as
     :func:`.solve.solve` says it (``complete`` only when the assignments were told, no more than
     ``MAX_SEARCHED``, and the labelled search under each is complete); ``cells``: the assignments kept per
-    touch."""
+    touch, or where the poses told them the cells of poses kept per level."""
     points, index = np.asarray(points, dtype=np.float64).reshape(-1, 3), np.asarray(index)
     made = {}
 
@@ -145,8 +147,12 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
         """Each admitted assignment of the touches ``keep`` (a mask; the others left out, None in it) whose
         search leaves a region, with its problem and regions; the reason the assignments were not told (else
         ""); the assignments kept per touch."""
-        leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance,
-                                        threshold / sigma_mm**2, float(np.sqrt(threshold)), [to for *_, to in group])
+        q = threshold / sigma_mm**2
+        leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance, q,
+                                        float(np.sqrt(threshold)), [to for *_, to in group])
+        if reason or len(leaves) > MAX_SEARCHED:
+            # Shape alone leaves too many: the poses tell them (one of each orbit, turned below).
+            leaves, reason, kept = face_search(surfaces, points[keep], ball_radius_mm, tolerance, q, threshold, group)
         if len(leaves) > MAX_SEARCHED:
             leaves, reason = [], f"the touches fit {len(leaves)} assignments, more than the {MAX_SEARCHED} searched"
         trees = []

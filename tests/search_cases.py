@@ -242,6 +242,12 @@ CASES = [
          unlabelled=True, symmetric=True, anywhere=True),
     Case("inclined-plane-cylinder 12 anywhere", "inclined-plane-cylinder", (SIGMA_MM,),
          _anywhere("inclined-plane-cylinder", 12), unlabelled=True, anywhere=True),
+    # Parts of many alike faces, told apart by poses (registration.face_search): the cube's 24 turns and the
+    # v-block's half turn fit touches anywhere alike, none separates them.
+    Case("cube 12 anywhere", "cube", (SIGMA_MM,), _anywhere("cube", 12), unlabelled=True, symmetric=True,
+         anywhere=True),
+    Case("v-block 12 anywhere", "v-block", (SIGMA_MM,), _anywhere("v-block", 12), unlabelled=True, symmetric=True,
+         anywhere=True),
 ]
 VARIANTS = [(case, noise) for case in CASES for noise in case.noise_mm]
 

@@ -2,7 +2,8 @@
 
 Independent answers: a finer tessellation of the solid by the CAD kernel (each triangle must lie on its own
 face's feature, inside its patch), the true pose the touches were made at, and the brute force (the search_cases
-rows "... 12 anywhere", judged in test_solution_search.py and, on 200 layouts, in benchmarks/bench_search.py).
+rows "... 12 anywhere", judged in test_solution_search.py and, on 200 layouts, in benchmarks/bench_search.py;
+the cube's and the v-block's told by poses, tests/test_face_search.py).
 """
 
 import json
@@ -93,7 +94,8 @@ def test_a_face_no_feature_takes_is_named(solid, words):
         faces_from_json({"faces": record})
 
 
-@pytest.mark.parametrize("name", ["quarter-sphere 12 anywhere", "inclined-plane-cylinder 12 anywhere"])
+@pytest.mark.parametrize("name", ["quarter-sphere 12 anywhere", "inclined-plane-cylinder 12 anywhere",
+                                  "cube 12 anywhere", "v-block 12 anywhere"])
 def test_touches_anywhere_give_the_true_pose_among_their_answers(name):
     """On the first layouts of the judged rows: the search completes and the truth is among the poses, each
     touch on the face it was drawn on (or on one as near: a touch where two faces meet)."""
@@ -173,15 +175,20 @@ def test_simulate_anywhere_draws_on_the_whole_part(built, tmp_path):
 
 
 def test_more_assignments_than_are_searched_say_incomplete(monkeypatch):
-    """Past MAX_SEARCHED assignments (here 5: the quarter-sphere's first layout leaves more) the search stops and
-    says so; nothing is claimed (exit 6 or underdetermined)."""
-    from fixturecad.registration import unlabelled
+    """Past MAX_SEARCHED assignments (here 5: the quarter-sphere's first layout leaves more) the poses tell them;
+    where they stop too (here past 1,000 cells), or leave more than MAX_SEARCHED (the cube's first layout: 3 of
+    its 24 turns' orbits, more than 1), the search stops and says so; nothing is claimed (exit 6 or
+    underdetermined)."""
+    from fixturecad.registration import face_search, unlabelled
     from fixturecad.registration.touchfile import exit_code
 
-    monkeypatch.setattr(unlabelled, "MAX_SEARCHED", 5)
-    case, noise = next((c, z) for c, z in VARIANTS if c.name == "quarter-sphere 12 anywhere")
-    lay = layout(case, noise, 0)
-    result = register_touches(lay.features, {}, unlabelled=np.vstack(list(lay.touches.values())), sigma_mm=noise,
-                              faces=lay.features)
-    assert result["search"] == "incomplete" and "more than the 5 searched" in result["search_reason"]
-    assert exit_code(result) in (4, 6)
+    for name, searched, cells, reason in [("quarter-sphere 12 anywhere", 5, 1000, "not told within 1000 cells"),
+                                          ("cube 12 anywhere", 1, face_search.MAX_CELLS, "more than the 1 searched")]:
+        monkeypatch.setattr(unlabelled, "MAX_SEARCHED", searched)
+        monkeypatch.setattr(face_search, "MAX_CELLS", cells)
+        case, noise = next((c, z) for c, z in VARIANTS if c.name == name)
+        lay = layout(case, noise, 0)
+        result = register_touches(lay.features, {}, unlabelled=np.vstack(list(lay.touches.values())), sigma_mm=noise,
+                                  faces=lay.features)
+        assert result["search"] == "incomplete" and reason in result["search_reason"], name
+        assert exit_code(result) in (4, 6)
