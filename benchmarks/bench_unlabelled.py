@@ -5,7 +5,8 @@ template, N layouts: the touches drawn at random on the default plan's point-tou
 (evenly over the features), a random true pose, 5 um noise, the labels dropped; ``register_touches`` with
 ``unlabelled=`` and no nominal pose, and the same touches labelled. Per template: the statuses and how the
 search ended; the wrong answers (``unique`` more than 10 sigma from the truth, the labelled registration's
-sigma; ``inconsistent`` or a lost truth although the search said complete); the error over the labelled
+sigma; ``inconsistent`` or a lost truth although the search said complete, where the touches labelled fit a
+pose); the error over the labelled
 bound; the CPU time (``time.process_time``). The truth is the independent answer; no brute force runs.
 """
 
@@ -74,7 +75,9 @@ def run(count, touches, seed):
                 wrong += error > WRONG_SIGMAS * sigma + 1e-3
                 ratios.append(error / max(sigma, 1e-12))
             elif result["search"] == "complete" and not any(e <= WRONG_SIGMAS * sigma + 1e-3 for e in found):
-                wrong += 1  # complete, yet the truth is not among the poses
+                # Complete, yet the truth is not among the poses: wrong unless the same touches labelled fit no
+                # pose either (the noise fails the test at the truth now and then).
+                wrong += labelled["status"] != "inconsistent"
         print(f"{name} | {dict(statuses)} | {wrong} | "
               f"{statistics.median(ratios) if ratios else float('nan'):.2f} | "
               f"{statistics.median(times):.0f}, {np.percentile(times, 95):.0f}, {max(times):.0f}")
