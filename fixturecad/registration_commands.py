@@ -440,26 +440,29 @@ def plot_errors(records, summary, path: Path) -> None:
 
     assigned = [pair for r in records for pair in r.get("assigned", ())]
     fig, axes = plt.subplots(1, 3 if assigned else 2, figsize=(15, 4.6) if assigned else (10, 4))
-    panels = [
-        ("translation_error_mm", 1e3, "translation error (um)", "crb_translation_mm", "rms_translation_error_mm"),
-        ("rotation_error_deg", 1e3, "rotation error (mdeg)", "crb_rotation_deg", "rms_rotation_error_deg"),
-    ]
+    panels = [("translation_error_mm", 1e3, "translation error (um)", "crb_translation_mm"),
+              ("rotation_error_deg", 1e3, "rotation error (mdeg)", "crb_rotation_deg")]
     some = 0 < summary["unique_trials"] < summary["trials"]
     if summary["unique_trials"]:
         records = [r for r in records if r["status"] == "unique"]
-        panels = [(key, scale, label + (f", the {summary['unique_trials']} unique trials" if some else ""),
-                   f"unique_{bound}", f"unique_{rms}") for key, scale, label, bound, rms in panels]
-    else:  # every pose shown is one of several that fit (or one the touches leave weak): not a claimed one
-        panels = [(key, scale, label + ", no unique trial: each one's first pose", bound, rms)
-                  for key, scale, label, bound, rms in panels]
-    for ax, (key, scale, label, bound, rms) in zip(axes, panels):
+        panels = [(key, scale, label + (f", the {summary['unique_trials']} unique trials" if some else ""), bound)
+                  for key, scale, label, bound in panels]
+    else:
+        # Every pose shown is one of several that fit, not a claimed one; an underdetermined trial's pose is not
+        # even that (its touches leave a motion free: its bound has no size), unless there is nothing else.
+        records = [r for r in records if r["status"] != "underdetermined"] or records
+        panels = [(key, scale, label + ", no unique trial: each one's first pose", bound)
+                  for key, scale, label, bound in panels]
+    for ax, (key, scale, label, bound) in zip(axes, panels):
         values = np.array([r[key] for r in records]) * scale
+        bounds = np.array([np.nan if r[bound] is None else r[bound] for r in records]) * scale
         ax.hist(values, bins=40, color="0.7")
-        ax.axvline(summary[bound] * scale, color="tab:red", label="Cramer-Rao bound (RMS)")
-        ax.axvline(summary[rms] * scale, color="tab:blue", linestyle="--", label="observed RMS")
+        ax.axvline(np.sqrt(np.nanmean(bounds**2)), color="tab:red", label="Cramer-Rao bound (RMS)")
+        ax.axvline(np.sqrt(np.nanmean(values**2)), color="tab:blue", linestyle="--", label="observed RMS")
         ax.set_xlabel(label)
         ax.set_ylabel("trials")
         ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of trials
+        ax.xaxis.set_major_locator(MaxNLocator(6))  # wide errors' long labels would run together
         ax.legend()
     if assigned:
         _plot_assignment(axes[2], assigned)
