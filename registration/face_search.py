@@ -45,6 +45,7 @@ MAX_CELLS = 600_000  # cells searched in all before the search stops (10-20 us e
 MAX_LEVELS = 40  # splits of a cell before the search stops
 PRODUCT = 64  # a cell narrower than the reach keeps every assignment its candidates give, at most this many
 SLACK = 1e-9  # relative: rounding kept on the bounds' side
+CHUNK = 32768  # cells bounded at once
 
 
 def face_search(surfaces, points, ball_radius_mm, tolerance, q, threshold, group=()):
@@ -75,13 +76,9 @@ def face_search(surfaces, points, ball_radius_mm, tolerance, q, threshold, group
     v, w, _, _ = first_cells()
     ylo, yhi = np.repeat(low.min(axis=0)[None], len(v), 0), np.repeat(high.max(axis=0)[None], len(v), 0)
     C = np.ones((len(v), n, F), bool)
-    found, kept, searched = set(), [], 0
-    for _ in range(MAX_LEVELS):
-        if not len(v):
-            break
-        searched += len(v)
-        if searched > MAX_CELLS:
-            return [], f"the touches' surfaces were not told within {MAX_CELLS} cells of poses", kept
+    def pruned(v, w, ylo, yhi, C):
+        """The cells that may hold a pose that passes, their y boxes narrowed and their candidates ``C`` (K, n,
+        F) left, and each touch's turn (K, n), mm."""
         K = len(v)
         R0 = rotation_from_vector(v)
         a = np.einsum("kji,nj->kni", R0, b)  # R0^T b_i
@@ -100,14 +97,23 @@ def face_search(surfaces, points, ball_radius_mm, tolerance, q, threshold, group
                 d = least_over_box(middle - anchor[f], np.broadcast_to(half[:, None], middle.shape), direction[f],
                                    point[f:f + 1], np.zeros(1, bool), offset[f])
             least[..., f] = np.where(meets, np.maximum(d - g, 0.0), np.inf)
-        C &= least <= reach
+        C = C & (least <= reach)
         nearest = np.min(np.where(C, np.maximum(least - dev, 0.0), np.inf), axis=2)
         keep = (np.all(ylo <= yhi, axis=1) & C.any(axis=2).all(axis=1) & ~beyond_pi(v, w)
                 & (np.sum(np.where(np.isfinite(nearest), nearest, 0.0) ** 2, axis=1) <= threshold * (1.0 + SLACK)))
         if len(turns):
             gain = np.einsum("kij,sij->ks", R0, turns) - np.trace(R0, axis1=1, axis2=2)[:, None]
             keep &= ~np.any(gain > 4.0 * delta[:, None] * sines[None], axis=1)
-        v, w, ylo, yhi, C, g = v[keep], w[keep], ylo[keep], yhi[keep], C[keep], g[keep]
+        return v[keep], w[keep], ylo[keep], yhi[keep], C[keep], g[keep]
+
+    found, kept, searched = set(), [], 0
+    for _ in range(MAX_LEVELS):
+        if not len(v):
+            break
+        searched += len(v)
+        # A chunk of cells at a time: a level's arrays grow with cells x touches x surfaces.
+        parts = [pruned(*(x[s:s + CHUNK] for x in (v, w, ylo, yhi, C))) for s in range(0, len(v), CHUNK)]
+        v, w, ylo, yhi, C, g = (np.concatenate(x) for x in zip(*parts))
         kept.append(len(v))
         count = np.prod(C.sum(axis=2), axis=1)
         done = (count == 1) | ((count <= PRODUCT) & (g.max(axis=1, initial=0.0) <= root)
@@ -116,6 +122,8 @@ def face_search(surfaces, points, ball_radius_mm, tolerance, q, threshold, group
             found.update(itertools.product(*[np.flatnonzero(c) for c in C[k]]))
         v, w, ylo, yhi, C, g = v[~done], w[~done], ylo[~done], yhi[~done], C[~done], g[~done]
         turning = g.max(axis=1, initial=0.0) > 0.25 * (yhi - ylo).max(axis=1)
+        if searched + 8 * turning.sum() + 2 * (~turning).sum() > MAX_CELLS:  # before the split takes the memory
+            return [], f"the touches' surfaces were not told within {MAX_CELLS} cells of poses", kept
         C = np.concatenate([np.repeat(C[turning], 8, axis=0), np.repeat(C[~turning], 2, axis=0)])
         v, w, ylo, yhi = split(v, w, ylo, yhi, turning, np.ones(3, bool))
     if len(v):
