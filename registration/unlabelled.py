@@ -16,8 +16,8 @@ import dataclasses
 import numpy as np
 
 from .assignments import admitted
-from .face_search import face_search
 from .defaults import DEFAULT_SIGMA_MM, MAX_COORDINATE_MM, SENSOR_LEVER_MM
+from .face_search import face_search
 from .patches import patch_box
 from .pose import rotation_from_vector
 from .problem import Problem
