@@ -304,9 +304,10 @@ def _unit(rng):
 
 
 def summarise(records, noise):
-    """Median, 95th percentile and RMS of the errors (of the trials that gave a pose), success rate, ratio of
-    RMS error to the bound over the trials that call their pose unique (an ambiguous trial's pose may be another
-    that fits as well, an underdetermined one's is not claimed)."""
+    """Median, 95th percentile and RMS of the errors (of the trials that gave a pose), the bound's RMS (of those
+    not underdetermined), success rate, ratio of RMS error to the bound over the trials that call their pose
+    unique (an ambiguous trial's pose may be another that fits as well, an underdetermined one's is not
+    claimed)."""
     import numpy as np
 
     et = np.array([r["translation_error_mm"] for r in records])
@@ -323,7 +324,10 @@ def summarise(records, noise):
     for r in records:
         statuses[r["status"]] = statuses.get(r["status"], 0) + 1
     rms_t, rms_r = float(np.sqrt(np.nanmean(et**2))), float(np.sqrt(np.nanmean(er**2)))
-    crb_t, crb_r = float(np.sqrt(np.nanmean(bt**2))), float(np.sqrt(np.nanmean(br**2)))
+    # An underdetermined trial's touches leave a motion free: its bound has no size to average (unless all are).
+    sized = np.array([r["status"] != "underdetermined" for r in records])
+    sized = sized if sized.any() else ~sized
+    crb_t, crb_r = float(np.sqrt(np.nanmean(bt[sized] ** 2))), float(np.sqrt(np.nanmean(br[sized] ** 2)))
     unique = np.array([r["status"] == "unique" for r in records])
 
     def unique_rms(values):
