@@ -96,6 +96,15 @@ def least_of_orbits(rows, turns):
     return rows[keep]
 
 
+def grown_boxes(features, offsets, tolerance, q, root):
+    """Each feature's deviation bound (S,), mm (0 on an exact part), and its patch box grown as far as a touch
+    that passes may lie off it (:func:`.search.patch_growth`): low and high (S, 3)."""
+    dev = np.array([0.0 if tolerance is None else float(deviation_bound(tolerance, f, q)) for f in features])
+    grow = patch_growth(root, dev, offsets)
+    boxes = np.array([patch_box(f) for f in features])
+    return dev, boxes[:, 0] - grow[:, None], boxes[:, 1] + grow[:, None]
+
+
 class Tables:
     """The tests of the module doc, computed once for every pair and quad of touches on each element."""
 
@@ -103,11 +112,8 @@ class Tables:
         self.places = places
         n, S = len(places), len(features)
         self.core = [f.core()[0] for f in features]
-        dev = np.array([0.0 if tolerance is None else float(deviation_bound(tolerance, f, q)) for f in features])
+        dev, low, high = grown_boxes(features, offsets, tolerance, q, root)
         self.reach, self.offsets = root + dev, offsets
-        grow = patch_growth(root, dev, offsets)
-        boxes = np.array([patch_box(f) for f in features])
-        low, high = boxes[:, 0] - grow[:, None], boxes[:, 1] + grow[:, None]
         least, most = box_distances(low, high)
         sphere = np.array([c == "point" for c in self.core]) & (offsets > 0.0)
         most[np.diag_indices(S)] = np.where(sphere, np.minimum(np.diag(most), 2.0 * (offsets + self.reach)),

@@ -37,9 +37,9 @@ import itertools
 
 import numpy as np
 
-from .patches import patch_box
+from .assignments import grown_boxes, least_of_orbits
 from .pose import rotation_from_vector
-from .search import beyond_pi, deviation_bound, first_cells, least_over_box, patch_growth, propagated, split
+from .search import beyond_pi, first_cells, least_over_box, propagated, split
 
 MAX_CELLS = 600_000  # cells searched in all before the search stops (10-20 us each; the v-block needs up to 363,000)
 MAX_LEVELS = 40  # splits of a cell before the search stops
@@ -65,11 +65,8 @@ def face_search(surfaces, points, ball_radius_mm, tolerance, q, threshold, group
     direction = np.array([np.zeros(3) if d is None else d for _, _, d, _ in cores], float)
     offset = np.array([radius + ball_radius_mm for *_, radius in cores])
     level = np.einsum("fd,fd->f", anchor, direction) + offset  # a plane's touches' n.x at contact
-    dev = np.zeros(F) if tolerance is None else np.array([deviation_bound(tolerance, f, q) for f in surfaces], float)
+    dev, low, high = grown_boxes(surfaces, offset, tolerance, q, root)
     reach = (root + dev) * (1.0 + SLACK) + SLACK
-    boxes = np.array([patch_box(f) for f in surfaces])
-    grow = patch_growth(root, dev, offset)
-    low, high = boxes[:, 0] - grow[:, None], boxes[:, 1] + grow[:, None]
     turns = np.array([R for R, _, _ in group]).reshape(-1, 3, 3)
     sines = np.sqrt(np.maximum(3.0 - np.trace(turns, axis1=1, axis2=2), 0.0) / 4.0)  # sin(phi / 2)
 
@@ -155,17 +152,13 @@ def _contracted(C, a, g, ylo, yhi, low, high, plane, direction, level, reach):
 
 def _least_of_orbits(found, surfaces, group):
     """The assignments (tuples of surface indices) as ids, each the least of its orbit under the group's maps
-    (by the surfaces' order), once each."""
+    (by the surfaces' order), once each: their orbits' members, of which :func:`.assignments.least_of_orbits`
+    keeps the least."""
     if not found:
         return []
     ids = [f.id for f in surfaces]
     index = {fid: k for k, fid in enumerate(ids)}
     maps = [np.array([index[to[fid]] for fid in ids]) for _, _, to in group]
     rows = np.array(sorted(found), int)
-    least = rows.copy()
-    for m in maps:
-        image = m[rows]
-        first = np.argmax(image != least, axis=1)
-        at = np.arange(len(rows))
-        least = np.where((image[at, first] < least[at, first])[:, None], image, least)
-    return sorted({tuple(ids[k] for k in row) for row in least})
+    members = np.unique(np.concatenate([rows] + [m[rows] for m in maps]), axis=0)
+    return sorted(tuple(ids[k] for k in row) for row in least_of_orbits(members, maps))
