@@ -165,6 +165,8 @@ def test_simulate_s_ratio_to_the_bound_takes_the_unique_trials_alone():
     assert s["ratio_translation_to_crb"] == pytest.approx(np.sqrt((0.003**2 + 0.005**2) / 2) / 0.004)
     s.update(trials=4, noise_mm=0.005, plan="default", touch_plan="default", fixture_tolerance_mm=None)
     assert "over the 2 unique trials" in format_summary(s)
+    # The bound's RMS line: the underdetermined trial's unbounded bound left out, not averaged to infinity.
+    assert s["crb_translation_mm"] == pytest.approx(0.004)
     s = summarise(records[2:], 0.005)
     assert s["ratio_translation_to_crb"] is None
     s.update(trials=2, noise_mm=0.005, plan="default", touch_plan="default", fixture_tolerance_mm=None)
