@@ -432,6 +432,7 @@ class Tree:
         self.patch_low, self.patch_high = np.array([box[0] for box in boxes]), np.array([box[1] for box in boxes])
         grow = patch_growth(self.root, self.dev, self.offset)
         self.low, self.high = self.patch_low - grow[:, None], self.patch_high + grow[:, None]
+        self.mode_moves(threshold / problem.sigma**2)
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
@@ -474,12 +475,16 @@ class Tree:
         self.paired_projector = projector[self.paired]
         # A sphere's centre touched four times or more lies where its touches put it in the measurement frame,
         # whatever the pose: each touch within its contact offset, give or take sqrt(T) and its deviation bound
-        # (no turn), of it. That box bounds y with one turn, the centre's (:meth:`zeroth_bound`).
+        # (no turn), of it; on a printed sphere, the printed centre within sqrt(T) of a common radius
+        # (:meth:`printed_centre`). That box bounds y with one turn, the centre's (:meth:`zeroth_bound`).
         self.centres = []
         for k in range(len(groups)):
             idx = np.flatnonzero((owner == k) & self.round & (self.core == "point"))
             if len(idx) >= 4 and np.allclose(self.anchor[idx], self.anchor[idx[0]]):
                 lo, hi = shell_box(self.points[idx], self.offset[idx], self.root + self.dev[idx])
+                if self.L is not None and self.radius_own[idx].all():
+                    lo2, hi2 = self.printed_centre(idx)
+                    lo, hi = np.maximum(lo, lo2), np.minimum(hi, hi2)
                 rel, half = 0.5 * (lo + hi) - self.centroid, 0.5 * (hi - lo)
                 # (the box's middle off the centroid, its half-widths, and how far a unit turn moves its points)
                 self.centres.append((self.anchor[idx[0]], rel, half, np.linalg.norm(rel) + np.linalg.norm(half)))
@@ -545,6 +550,12 @@ class Tree:
         out = []
         for f, points, reach, idx in self.planes:
             normal = measured_normal(points, reach) if len(points) >= 3 else None
+            if len(points) >= 3 and self.L is not None and self.radius_own[idx].all():
+                # A printed plane's modes move it as a whole: its touches lie within sqrt(T) of a plane whose
+                # normal is within its largest turn of the drawn one's (:meth:`modes`).
+                tight = measured_normal(points, np.full(len(idx), self.root))
+                if tight is not None and (normal is None or tight[1] + self.tilt[idx[0]] < normal[1]):
+                    normal = tight[0], tight[1] + self.tilt[idx[0]]
             if normal is None:
                 continue
             others = np.setdiff1d(np.arange(len(self.points)), idx)
@@ -638,6 +649,46 @@ class Tree:
             self.sensor_radius[k, columns] = m.radius
             self.printed.append(Printed(_largest_turn(tolerance, f, q),
                                         deviation_bound_mm(tolerance, g.feature, m.centre[None], q), m.centre))
+
+    def printed_centre(self, idx):
+        """A box (lo, hi) holding the image of the centre of a printed sphere touched by ``idx`` (four or more
+        touches on it, point or ball, its own radius).
+
+        A pose that passes has modes ``z = L u``, ``|u|^2 <= q``, with each row ``r_i - n_i.dc - dr`` within
+        sqrt(T): the modes move the centre by dc (at most ``centre_move``) and the radius by dr (at most
+        ``radius_grow``, :meth:`mode_moves`). So each touch lies from the printed centre c + dc within ``R' +- w`` of a radius ``R' =
+        R + dr`` common to the touches, ``w = sqrt(T) + |dc|^2 / (2 (a - |dc|))`` (``|s - dc| - (|s| - n.dc)``
+        lies in ``[0, |dc|^2 / (2 (|s| - |dc|))]``, ``a`` the least ``|s|``): the radical slabs of a common
+        radius are ``4 R' w`` wide, wherever dr puts R'. The printed centre's box (:func:`shell_box` with the
+        largest R') grown by the largest ``|dc|`` holds the centre's."""
+        move, grow = self.centre_move[idx[0]], self.radius_grow[idx[0]]
+        least = np.min(self.offset[idx] - self.root - self.dev[idx]) - move
+        if least <= 0.0:
+            return np.full(3, -np.inf), np.full(3, np.inf)
+        width = self.root + move**2 / (2.0 * least)
+        lo, hi = shell_box(self.points[idx], self.offset[idx] + grow, np.full(len(idx), width))
+        return lo - move, hi + move
+
+    def mode_moves(self, q):
+        """What the modes of a pose that passes (``z = L u``, ``|u|^2 <= q``) move, per touch (mm):
+        ``centre_move``, the largest move ``|omega x c + v|`` of its feature's anchor c; ``radius_grow``, of its
+        radius; ``turn_dev``, the largest ``|omega x x + v|`` at any place x of its grown patch box (at most
+        ``centre_move`` plus the largest turn times the box's farthest corner from c), the part of its row's
+        change with the modes that turns with its outward direction (a radius mode's, -1 on a touch of its own
+        feature, does not; a stand-in keeps its deviation bound there)."""
+        n = len(self.points)
+        self.centre_move, self.radius_grow, self.turn_dev = np.zeros(n), np.zeros(n), self.dev.copy()
+        if self.L is None:
+            return
+        twists = self.mode_twists * ~self.mode_radius[..., None]
+        centre = cross(twists[..., :3], self.anchor[:, None]) + twists[..., 3:]  # (n, k, 3)
+        self.centre_move = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", centre, self.L), ord=2, axis=(1, 2))
+        turn = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", twists[..., :3], self.L), ord=2, axis=(1, 2))
+        self.radius_grow = np.sqrt(q) * np.linalg.norm(self.mode_radius @ self.L, axis=1)
+        corners = np.where(CORNERS[None] > 0.0, self.high[:, None], self.low[:, None])  # (n, 8, 3)
+        far = np.max(np.linalg.norm(corners - self.anchor[:, None], axis=2), axis=1)
+        own = self.round & self.radius_own & np.isfinite(far)  # an unbounded patch keeps the deviation bound
+        self.turn_dev[own] = (self.centre_move + turn * np.where(turn > 0.0, far, 0.0))[own]
 
     def deviation_rows(self, unit, touch, x, R):
         """How each row (unit directions (K, R, 3) of touches ``touch`` (R,) at fixture places x (K, n, 3), the
@@ -865,7 +916,7 @@ class Tree:
             if self.round.any():
                 rounds = slice(len(self.row_touch), None)
                 off_dev[:, rounds] += np.where(usable[..., 0], move / np.maximum(core_gap, 1e-300), np.inf) \
-                    * self.dev[self.round]
+                    * self.turn_dev[self.round]
             # A stand-in's radius mode along its sensor's normal turns with the cell: off by delta times its size.
             off_dev += c.delta[:, None] * self.radius_dev[touch]
             remainder2 = remainder2 + np.sum(off_dev**2, axis=1)

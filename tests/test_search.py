@@ -17,7 +17,7 @@ from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, rotation_boxes, row_span, search,
+                                            measured_normal, rotation_boxes, row_span, search, shell_box,
                                             normal_signs, stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
@@ -540,25 +540,39 @@ def _cells_hold_the_truth(name, counts, ball, printed, w_range, half_range_mm):
 
 @pytest.mark.parametrize("name,counts,ball", CASES[:-1], ids=IDS[:-1])
 def test_a_cell_keeps_touches_off_their_features_by_their_deviation_bound(name, counts, ball):
-    """A printed part: each touch moved off its feature by its deviation bound, outward or inward at random,
-    costs nothing at the truth (each distance less its deviation bound is 0), so on 300 cells about the
-    truth, from 1e-5 rad to the whole turn and 0.1 um to 60 mm wide, the zeroth-order bound is 0 and the y
-    box holds the truth's y. It fails when any of the bound's terms, or the slabs, leaves a deviation out."""
+    """A printed part: each touched feature moved by its modes as far as a pose that passes allows (``z^T
+    S^-1 z = q``, the direction that moves one of its touches, at random, the most, either way), its touches
+    moved with it, costs nothing at the truth (each distance less its deviation bound is 0), so on 300 cells
+    about the truth, from 1e-5 rad to the whole turn and 0.1 um to 60 mm wide, the zeroth-order bound is 0
+    and the y box holds the truth's y. It fails when any of the bound's terms, the slabs or the printed
+    spheres' centres' boxes leaves a deviation out."""
     rng = np.random.default_rng(9)
     features, touches, R, t = _layout(name, counts, rng, ball)
     document = features_document(make(name))
     tolerance = tolerance_from_document(features_from_json(document), document)
     problem = Problem(build_groups(features, touches, ball), 0.005, tolerance=tolerance)
+    q = threshold_mm2(problem) / 0.005**2
     dev = Tree(problem, threshold_mm2(problem)).dev
-    first = 0
+    moved = []
     for fid, points in touches.items():
         local = (points - t) @ R
-        sign = rng.choice([-1.0, 1.0], len(points))[:, None]
-        touches[fid] = points + sign * dev[first:first + len(points), None] * features[fid].normal_at(local) @ R.T
-        first += len(points)
+        normal = features[fid].normal_at(local)
+        modes, part = tolerance.modes[fid], tolerance.slices[fid]
+        # Each touch's move along its normal per mode coordinate: n.(omega x p + v), a radius mode 1.
+        rows = np.where(modes.radius, 1.0, np.einsum("ni,nki->nk", normal, np.cross(modes.twists[None, :, :3],
+                                                                                   local[:, None])
+                                                          + modes.twists[None, :, 3:]))
+        S = tolerance.covariance[part, part]
+        row = rows[rng.integers(len(points))]
+        spread = row @ S @ row
+        z = rng.choice([-1.0, 1.0]) * np.sqrt(q / spread) * (S @ row) * (1.0 - 1e-9) if spread > 0 else 0.0 * row
+        touches[fid] = points + (rows @ z)[:, None] * normal @ R.T
+        moved.append(np.abs(rows @ z))
+    moved = np.concatenate(moved)
+    assert np.all(moved <= dev + 1e-9)  # within each touch's deviation bound, as a pose that passes puts it
     problem = Problem(build_groups(features, touches, ball), 0.005, tolerance=tolerance)
     tree = Tree(problem, threshold_mm2(problem))
-    assert dev.max() > 0.01  # the part's deviations are there to be left out
+    assert moved.max() > 0.01  # the part's deviations are there to be left out
     v_true = vector_from_rotation(R)
     y_true = R.T @ (tree.centroid - t) @ tree.Q
     for _ in range(300):
@@ -796,3 +810,65 @@ def test_a_weak_pose_stops_the_search(monkeypatch):
     monkeypatch.setattr(solve, "search", lambda problem, threshold, stop=None: search(problem, threshold))
     full = register_touches(lay.features, lay.touches, tolerance=lay.tolerance)
     assert full["status"] == "underdetermined" and full["search"] == "complete"
+
+
+def _printed(name, counts, seed):
+    """A printed template touched ``counts`` times a feature at a random pose, each feature moved by its modes
+    ``z = L u`` with ``|u|^2 = q`` in a random direction (as far as a pose that passes allows, the centre and
+    radius of a sphere, a plane's tilt and shift), the touches on the moved features, each off them by up to
+    sqrt(T) at random: (the Tree, R, t)."""
+    rng = np.random.default_rng(seed)
+    features, touches, R, t = _layout(name, counts, rng)
+    document = features_document(make(name))
+    tolerance = tolerance_from_document(features_from_json(document), document)
+    problem = Problem(build_groups(features, touches), 0.005, tolerance=tolerance)
+    root = np.sqrt(threshold_mm2(problem))
+    for fid, points in touches.items():
+        modes, part = tolerance.modes[fid], tolerance.slices[fid]
+        h, E = np.linalg.eigh(tolerance.covariance[part, part])
+        u = rng.normal(size=len(h))
+        z = (E * np.sqrt(np.maximum(h, 0.0))) @ (u / np.linalg.norm(u)) * root / 0.005 * (1.0 - 1e-9)
+        omega, v = z @ modes.twists[:, :3], z @ modes.twists[:, 3:]
+        local = (points - t) @ R
+        normal = features[fid].normal_at(local)
+        if features[fid].kind == "sphere":
+            # The moved sphere itself: centre c + omega x c + v, radius R + dr.
+            centre = features[fid].core()[1]
+            centre = centre + np.cross(omega, centre) + v
+            radius = features[fid].core()[3] + z @ modes.radius
+            on = centre + radius * (local - centre) / np.linalg.norm(local - centre, axis=1)[:, None]
+        else:
+            on = local + np.cross(omega, local) + v  # the moved plane: each point turned and shifted with it
+            normal = normal + np.cross(omega, normal)
+        off = rng.uniform(-1.0, 1.0, len(points))[:, None] * root * normal / np.linalg.norm(normal, axis=1)[:, None]
+        touches[fid] = (on + off) @ R.T + t
+    problem = Problem(build_groups(features, touches), 0.005, tolerance=tolerance)
+    return Tree(problem, threshold_mm2(problem)), R, t
+
+
+def test_a_printed_spheres_centre_lies_in_its_box():
+    """A printed ball touched six times, moved as far as a pose that passes allows (its centre by up to 0.074
+    mm): the box its touches put the drawn centre's image in (Tree.printed_centre, within a common radius,
+    grown by the centre's move) holds it, on 200 parts, and is narrower than each touch's deviation bound
+    alone leaves it (search.shell_box with sqrt(T) plus that bound). It fails without the growth."""
+    narrower = 0
+    for seed in range(200):
+        tree, R, t = _printed("sphere-plate", {"ball_1": 6, "ball_2": 6, "ball_3": 6}, seed)
+        for k, (anchor, rel, half, _) in enumerate(tree.centres):
+            image = R @ anchor + t - tree.centroid
+            assert np.all(np.abs(image - rel) <= half + 1e-9)
+            idx = np.flatnonzero(np.isclose(tree.anchor, anchor).all(axis=1))
+            lo, hi = shell_box(tree.points[idx], tree.offset[idx], tree.root + tree.dev[idx])
+            narrower += bool(np.prod(2.0 * half) < 0.5 * np.prod(hi - lo))
+    assert narrower >= 400  # of 600 boxes: the ball whose centre does not move, and the others
+
+
+def test_a_printed_planes_normal_lies_in_its_cone():
+    """A printed plane touched six times, tilted as far as a pose that passes allows: the cone its touches
+    put the drawn normal's image in (within sqrt(T) of a plane, widened by the plane's largest turn) holds it,
+    on 200 parts."""
+    for seed in range(200):
+        tree, R, t = _printed("cube", {"top": 6, "front": 6, "left": 6}, seed)
+        assert len(tree.normals) == 3
+        for f, n, phi, _ in tree.normals:
+            assert np.arccos(min(abs(float(R @ f @ n)), 1.0)) <= phi + 1e-9
