@@ -16,7 +16,7 @@ from .verdict import Solution, chi_square_passes, judged, same_pose
 SCREEN_STARTS = 4  # candidate poses of the whole set an explanation is looked for from, lowest cost first
 
 
-def explanations(problem, features, solutions, initial_pose=None):
+def explanations(problem, features, solutions, initial_pose=None, told=()):
     """Every single touch whose removal, or whose move to another feature (a mislabelled touch), leaves
     touches that an admissible pose fits, with the poses it leads to.
 
@@ -28,7 +28,8 @@ def explanations(problem, features, solutions, initial_pose=None):
     left out again and the rest solved from scratch (from ``initial_pose``
     when given). A point or ball touch whose removal explains it is also put
     on every other feature, refined from the poses its removal leads to (a
-    label that fits implies a removal that does). Returns
+    label that fits implies a removal that does), but for the touches ``told``
+    (indices), whose every feature a complete search tried already. Returns
     [(touch index, the feature it is moved to or None when left out, Solution
     passing the residual test at rank 6 with admissible touches, the touch's
     distance mm from its labelled feature at that pose)].
@@ -46,7 +47,7 @@ def explanations(problem, features, solutions, initial_pose=None):
     for touch, fits in left_out.items():
         tries = [(None, fits)]
         group = next(g for g in problem.groups if touch in g.index)
-        if fits and group.points is not None:
+        if fits and group.points is not None and touch not in told:
             poses = [(s.rotation, s.translation) for s in fits]
             tries += [(fid, _fits_from(_moved(problem.without(touch), group, feature, touch), poses))
                       for fid, feature in features.items() if fid != group.feature.id]

@@ -147,7 +147,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         off = features_beyond_tolerance(problem, solutions) if problem.tolerance is not None else []
         result["fixture_flagged"] = [{"feature": fid, "mode": mode, "deviation": value, "departure_mm": mm}
                                      for fid, mode, value, mm, _ in off]
-        explained = explanations(problem, features, solutions, initial_pose)
+        # Unlabelled touches that the complete search put on every feature: none is tried on another again.
+        told = index if len(points) and initial_pose is None and solutions.search == "complete" else ()
+        explained = explanations(problem, features, solutions, initial_pose, told=set(int(i) for i in told))
         missed = _missed(problem, explained)
         if missed:
             # The search missed them: poses that fit every touch after all.
