@@ -673,7 +673,8 @@ class Tree:
         """What the modes of a pose that passes (``z = L u``, ``|u|^2 <= q``) move, per touch (mm):
         ``centre_move``, the largest move ``|omega x c + v|`` of its feature's anchor c; ``radius_grow``, of its
         radius; ``turn_dev``, the largest ``|omega x x + v|`` at any place x of its grown patch box (at most
-        ``centre_move`` plus the largest turn times the box's farthest corner from c), the part of its row's
+        ``centre_move`` plus the largest turn times the box's farthest corner from c, or the same about the box's
+        middle), the part of its row's
         change with the modes that turns with its outward direction (a radius mode's, -1 on a touch of its own
         feature, does not; a stand-in keeps its deviation bound there)."""
         n = len(self.points)
@@ -685,10 +686,21 @@ class Tree:
         self.centre_move = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", centre, self.L), ord=2, axis=(1, 2))
         turn = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", twists[..., :3], self.L), ord=2, axis=(1, 2))
         self.radius_grow = np.sqrt(q) * np.linalg.norm(self.mode_radius @ self.L, axis=1)
+        # About the anchor, or about the box's middle p (``omega x x + v = omega x (x - p) + (omega x p + v)``), the
+        # nearer for a long boss anchored at one end.
         corners = np.where(CORNERS[None] > 0.0, self.high[:, None], self.low[:, None])  # (n, 8, 3)
+        middle = 0.5 * (self.low + self.high)
         far = np.max(np.linalg.norm(corners - self.anchor[:, None], axis=2), axis=1)
-        own = self.round & self.radius_own & np.isfinite(far)  # an unbounded patch keeps the deviation bound
-        self.turn_dev[own] = (self.centre_move + turn * np.where(turn > 0.0, far, 0.0))[own]
+        half = np.linalg.norm(0.5 * (self.high - self.low), axis=1)
+        bounded = np.isfinite(half)  # an unbounded patch: no middle, and no lever but where nothing turns
+        at_middle = cross(twists[..., :3], np.where(bounded[:, None], middle, 0.0)[:, None]) + twists[..., 3:]
+        moved = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", at_middle, self.L), ord=2, axis=(1, 2))
+        lever = np.where(turn > 0.0, turn, 1.0)
+        bound = np.minimum(self.centre_move + np.where(turn > 0.0, lever * far, 0.0),
+                           np.where(bounded, moved + np.where(turn > 0.0, lever * np.where(bounded, half, 0.0), 0.0),
+                                    np.inf))
+        own = self.round & self.radius_own & np.isfinite(bound)
+        self.turn_dev[own] = bound[own]
 
     def deviation_rows(self, unit, touch, x, R):
         """How each row (unit directions (K, R, 3) of touches ``touch`` (R,) at fixture places x (K, n, 3), the

@@ -23,7 +23,7 @@ from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
 
-from search_cases import _features, _fixture, _tolerance
+from search_cases import _draw, _features, _fixture, _tolerance
 from test_registration_engine import _plan
 
 # Every element a point or ball touch meets: planes (cube), planes and lines (v-block's edges are not
@@ -872,3 +872,35 @@ def test_a_printed_planes_normal_lies_in_its_cone():
         assert len(tree.normals) == 3
         for f, n, phi, _ in tree.normals:
             assert np.arccos(min(abs(float(R @ f @ n)), 1.0)) <= phi + 1e-9
+
+
+@pytest.mark.parametrize("name,counts", [("{R}{C-R-C}", {"boss_2": 6, "face_1": 3}),
+                                         ("sphere-plate", {"ball_1": 4, "ball_2": 4, "ball_3": 4})])
+def test_a_round_touchs_turning_deviation_bounds_its_features_move(name, counts):
+    """Tree.turn_dev, what a round touch's row change with the modes turns with its outward direction: the
+    largest ``|omega x x + v|`` of its feature's modes (as far as a pose that passes allows, ``|u|^2 = q``) at
+    any place x of its grown patch box. On a design's printed boss (shifted and tilted by its modes) and the
+    sphere-plate's balls, 400 mode vectors and places over the box: none moves farther. It fails with the
+    deviation bound there instead (the boss's tilt moves its far end across the axis, which the deviation
+    along the normal leaves out) or with a lever about the anchor that is half as long."""
+    rng = np.random.default_rng(11)
+    features = _features(name)
+    tolerance = _tolerance(name, features)
+    touches = {fid: _draw(features[fid], n, rng) for fid, n in counts.items()}
+    problem = Problem(build_groups(features, touches), 0.005, tolerance=tolerance)
+    tree = Tree(problem, threshold_mm2(problem))
+    q = threshold_mm2(problem) / 0.005**2
+    worst = 0.0
+    for i in np.flatnonzero(tree.round):
+        fid = problem.groups[tree.owner[i]].feature.id
+        modes, part = tolerance.modes[fid], tolerance.slices[fid]
+        h, E = np.linalg.eigh(tolerance.covariance[part, part])
+        u = rng.normal(size=(400, len(h)))
+        z = (u / np.linalg.norm(u, axis=1, keepdims=True) * np.sqrt(q)) @ (E * np.sqrt(np.maximum(h, 0.0))).T
+        twists = modes.twists * ~modes.radius[:, None]
+        corners = rng.integers(0, 2, (400, 3)).astype(bool)
+        x = np.where(corners, tree.high[i], tree.low[i])
+        moved = np.linalg.norm(np.cross(z @ twists[:, :3], x) + z @ twists[:, 3:], axis=1)
+        assert np.all(moved <= tree.turn_dev[i] * (1.0 + 1e-9))
+        worst = max(worst, float(moved.max() / tree.turn_dev[i]))
+    assert worst > 0.5  # the places and modes reach near the bound
