@@ -656,11 +656,11 @@ class Tree:
 
         A pose that passes has modes ``z = L u``, ``|u|^2 <= q``, with each row ``r_i - n_i.dc - dr`` within
         sqrt(T): the modes move the centre by dc (at most ``centre_move``) and the radius by dr (at most
-        ``radius_grow``, :meth:`mode_moves`). So each touch lies from the printed centre c + dc within ``R' +- w`` of a radius ``R' =
-        R + dr`` common to the touches, ``w = sqrt(T) + |dc|^2 / (2 (a - |dc|))`` (``|s - dc| - (|s| - n.dc)``
-        lies in ``[0, |dc|^2 / (2 (|s| - |dc|))]``, ``a`` the least ``|s|``): the radical slabs of a common
-        radius are ``4 R' w`` wide, wherever dr puts R'. The printed centre's box (:func:`shell_box` with the
-        largest R') grown by the largest ``|dc|`` holds the centre's."""
+        ``radius_grow``, :meth:`mode_moves`). So each touch lies from the printed centre c + dc within ``R' +-
+        w`` of a radius ``R' = R + dr`` common to the touches, ``w = sqrt(T) + |dc|^2 / (2 (a - |dc|))`` (``|s -
+        dc| - (|s| - n.dc)`` lies in ``[0, |dc|^2 / (2 (|s| - |dc|))]``, ``a`` the least ``|s|``): the radical
+        slabs of a common radius are ``4 R' w`` wide, wherever dr puts R'. The printed centre's box
+        (:func:`shell_box` with the largest R') grown by the largest ``|dc|`` holds the centre's."""
         move, grow = self.centre_move[idx[0]], self.radius_grow[idx[0]]
         least = np.min(self.offset[idx] - self.root - self.dev[idx]) - move
         if least <= 0.0:
@@ -674,9 +674,8 @@ class Tree:
         ``centre_move``, the largest move ``|omega x c + v|`` of its feature's anchor c; ``radius_grow``, of its
         radius; ``turn_dev``, the largest ``|omega x x + v|`` at any place x of its grown patch box (at most
         ``centre_move`` plus the largest turn times the box's farthest corner from c, or the same about the box's
-        middle), the part of its row's
-        change with the modes that turns with its outward direction (a radius mode's, -1 on a touch of its own
-        feature, does not; a stand-in keeps its deviation bound there)."""
+        middle), the part of its row's change with the modes that turns with its outward direction (a radius
+        mode's, -1 on a touch of its own feature, does not; a stand-in keeps its deviation bound there)."""
         n = len(self.points)
         self.centre_move, self.radius_grow, self.turn_dev = np.zeros(n), np.zeros(n), self.dev.copy()
         if self.L is None:
@@ -689,17 +688,16 @@ class Tree:
         # About the anchor, or about the box's middle p (``omega x x + v = omega x (x - p) + (omega x p + v)``), the
         # nearer for a long boss anchored at one end.
         corners = np.where(CORNERS[None] > 0.0, self.high[:, None], self.low[:, None])  # (n, 8, 3)
-        middle = 0.5 * (self.low + self.high)
         far = np.max(np.linalg.norm(corners - self.anchor[:, None], axis=2), axis=1)
         half = np.linalg.norm(0.5 * (self.high - self.low), axis=1)
-        bounded = np.isfinite(half)  # an unbounded patch: no middle, and no lever but where nothing turns
-        at_middle = cross(twists[..., :3], np.where(bounded[:, None], middle, 0.0)[:, None]) + twists[..., 3:]
+        bounded = np.isfinite(far) & np.isfinite(half)
+        far, half = np.where(bounded, far, 0.0), np.where(bounded, half, 0.0)
+        middle = np.where(bounded[:, None], 0.5 * (self.low + self.high), 0.0)
+        at_middle = cross(twists[..., :3], middle[:, None]) + twists[..., 3:]
         moved = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", at_middle, self.L), ord=2, axis=(1, 2))
-        lever = np.where(turn > 0.0, turn, 1.0)
-        bound = np.minimum(self.centre_move + np.where(turn > 0.0, lever * far, 0.0),
-                           np.where(bounded, moved + np.where(turn > 0.0, lever * np.where(bounded, half, 0.0), 0.0),
-                                    np.inf))
-        own = self.round & self.radius_own & np.isfinite(bound)
+        bound = np.minimum(self.centre_move + turn * far, moved + turn * half)
+        # An unbounded patch gives no lever: where its feature turns, the touch keeps its deviation bound.
+        own = self.round & self.radius_own & (bounded | (turn == 0.0))
         self.turn_dev[own] = bound[own]
 
     def deviation_rows(self, unit, touch, x, R):
