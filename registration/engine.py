@@ -148,8 +148,8 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
         result["fixture_flagged"] = [{"feature": fid, "mode": mode, "deviation": value, "departure_mm": mm}
                                      for fid, mode, value, mm, _ in off]
         # Unlabelled touches that the complete search put on every feature: none is tried on another again.
-        told = index if len(points) and initial_pose is None and solutions.search == "complete" else ()
-        explained = explanations(problem, features, solutions, initial_pose, told=set(int(i) for i in told))
+        told = set(index.tolist()) if len(points) and initial_pose is None and solutions.search == "complete" else set()
+        explained = explanations(problem, features, solutions, initial_pose, told=told)
         missed = _missed(problem, explained)
         if missed:
             # The search missed them: poses that fit every touch after all.

@@ -812,6 +812,15 @@ def test_a_weak_pose_stops_the_search(monkeypatch):
     assert full["status"] == "underdetermined" and full["search"] == "complete"
 
 
+def _edge_modes(tolerance, fid, q, rng, count):
+    """``count`` mode vectors z (count, k) of a printed feature as far as a pose that passes allows: ``z = L u``
+    (``L L^T`` its modes' covariance), ``|u|^2 = q``, u's direction at random."""
+    part = tolerance.slices[fid]
+    h, E = np.linalg.eigh(tolerance.covariance[part, part])
+    u = rng.normal(size=(count, len(h)))
+    return (u / np.linalg.norm(u, axis=1, keepdims=True) * np.sqrt(q)) @ (E * np.sqrt(np.maximum(h, 0.0))).T
+
+
 def _printed(name, counts, seed):
     """A printed template touched ``counts`` times a feature at a random pose, each feature moved by its modes
     ``z = L u`` with ``|u|^2 = q`` in a random direction (as far as a pose that passes allows, the centre and
@@ -824,10 +833,8 @@ def _printed(name, counts, seed):
     problem = Problem(build_groups(features, touches), 0.005, tolerance=tolerance)
     root = np.sqrt(threshold_mm2(problem))
     for fid, points in touches.items():
-        modes, part = tolerance.modes[fid], tolerance.slices[fid]
-        h, E = np.linalg.eigh(tolerance.covariance[part, part])
-        u = rng.normal(size=len(h))
-        z = (E * np.sqrt(np.maximum(h, 0.0))) @ (u / np.linalg.norm(u)) * root / 0.005 * (1.0 - 1e-9)
+        modes = tolerance.modes[fid]
+        z = _edge_modes(tolerance, fid, (root / 0.005) ** 2, rng, 1)[0] * (1.0 - 1e-9)
         omega, v = z @ modes.twists[:, :3], z @ modes.twists[:, 3:]
         local = (points - t) @ R
         normal = features[fid].normal_at(local)
@@ -893,10 +900,8 @@ def test_a_round_touchs_turning_deviation_bounds_its_features_move(name, counts)
     worst = 0.0
     for i in np.flatnonzero(tree.round):
         fid = problem.groups[tree.owner[i]].feature.id
-        modes, part = tolerance.modes[fid], tolerance.slices[fid]
-        h, E = np.linalg.eigh(tolerance.covariance[part, part])
-        u = rng.normal(size=(400, len(h)))
-        z = (u / np.linalg.norm(u, axis=1, keepdims=True) * np.sqrt(q)) @ (E * np.sqrt(np.maximum(h, 0.0))).T
+        modes = tolerance.modes[fid]
+        z = _edge_modes(tolerance, fid, q, rng, 400)
         twists = modes.twists * ~modes.radius[:, None]
         corners = rng.integers(0, 2, (400, 3)).astype(bool)
         x = np.where(corners, tree.high[i], tree.low[i])
