@@ -16,7 +16,9 @@ within the feature's patch box grown as the labelled search grows it (:func:`.se
 * four on one cylinder or line: two touches farther apart than ``2 (R + r)`` keep its axis within
   ``arcsin(2 (R + r) / |d|)`` of their difference's line (the part of d across the axis is at most ``2 (R +
   r)``), and any two such cones of the quad's six pairs meet;
-* five or more on one cylinder or line fit one axis (:func:`fit_an_axis`), tested on the tree's leaves.
+* five or more on one cylinder or line fit one axis (:func:`fit_an_axis`), tested on the tree's leaves; where
+  three or more lie on a plane beside them, the axis keeps its angle to the plane's normal, which those touches
+  bound (:func:`.search.normal_cones`).
 
 An interpretation tree (Grimson and Lozano-Perez 1987) takes the touches in turn, the labelled ones first:
 each assignment of the touches so far that passes every test among them is extended by each feature the next
@@ -33,14 +35,14 @@ import numpy as np
 
 from .elements import perpendicular_basis
 from .patches import patch_box
-from .search import contact_offset, deviation_bound, patch_growth
+from .search import contact_offset, deviation_bound, normal_cones, patch_growth
 
 MAX_ROWS = 20_000  # assignments of the touches so far kept at most: past that the poses tell them (:mod:`.face_search`)
 AXIS_TOUCHES = 5  # a cylinder's or line's touches, this many or more, searched for an axis they fit
 AXIS_CELLS = 4  # the axis search's first cells: this many a side on each of three cube faces ...
 AXIS_LEVELS = 8  # ... split this many times at most (a cell then 0.0014 rad across) ...
 AXIS_KEPT = 2000  # ... while a set keeps at most this many cells (it is taken to fit past either)
-AXIS_PAIRS = 36  # the narrowest cones about the set's pairs' lines that bound the axis search's cells (all of nine touches')
+AXIS_PAIRS = 6  # the narrowest cones about the set's pairs' lines that bound the axis search's cells (all of nine touches')
 CHUNK = 4096  # rows tested at once against the quads
 SLACK = 1e-9  # relative: rounding kept on the tests' side
 
@@ -77,7 +79,7 @@ def admitted(groups, surfaces, points, ball_radius_mm, tolerance, q, root, group
         kept.append(len(rows))
         if len(rows) > MAX_ROWS:
             return [], f"the touches' features were not told within {MAX_ROWS} assignments", kept
-    rows = tables.on_axes(rows)
+    rows = tables.on_axes(tables.at_angles(rows))
     return [tuple(elements[k][0] for k in row[labelled:]) for row in rows], "", kept
 
 
@@ -112,6 +114,7 @@ class Tables:
         self.places = places
         n, S = len(places), len(features)
         self.core = [f.core()[0] for f in features]
+        self.direction = [f.core()[2] for f in features]
         dev, low, high = grown_boxes(features, offsets, tolerance, q, root)
         self.reach, self.offsets = root + dev, offsets
         least, most = box_distances(low, high)
@@ -159,33 +162,78 @@ class Tables:
                 ok[idx[conflicts > 0]] = False
         return np.column_stack([new, k])[ok]
 
-    def on_axes(self, rows):
-        """The rows whose touches on each cylinder or line, ``AXIS_TOUCHES`` or more, may fit one axis
-        (:func:`fit_an_axis`)."""
+    def at_angles(self, rows):
+        """The rows in which each two planes that three or more touches lie on may keep their normals' angle (of
+        lines): the normals the touches bound (:func:`.search.normal_cones`) lie that angle apart, give or take
+        their cones' widths."""
+        planes = np.flatnonzero(np.array(self.core) == "plane")
+        if len(planes) < 2 or not len(rows):
+            return rows
+        normal, width = self.normals(planes, np.concatenate([rows == e for e in planes], axis=1))
         keep = np.ones(len(rows), bool)
+        for a, b in itertools.combinations(range(len(planes)), 2):
+            fixed = np.arccos(min(1.0, abs(float(self.direction[planes[a]] @ self.direction[planes[b]]))))
+            measured = np.arccos(np.clip(np.abs(np.sum(normal[:, a] * normal[:, b], axis=1)), 0.0, 1.0))
+            keep &= np.abs(measured - fixed) <= width[:, a] + width[:, b] + SLACK
+        return rows[keep]
+
+    def normals(self, planes, on):
+        """For each set of touches ``on`` (G, P n) on the ``planes`` (P element indices), each plane's normal
+        n* and the width phi of the cone about it that holds the plane's normal wherever its touches lie within
+        their reach (:func:`.search.normal_cones`; inf where fewer than three touches bound it): (G, P, 3), (G,
+        P), rad."""
+        G, n = len(on), len(self.places)
+        on = on.reshape(G, len(planes), n)
+        normal, width = np.zeros((G, len(planes), 3)), np.full((G, len(planes)), np.inf)
+        for k, e in enumerate(planes):
+            normal[:, k], phi = normal_cones(np.broadcast_to(self.places, (G, n, 3)),
+                                             np.full((G, n), self.reach[e]), on[:, k])
+            width[:, k] = np.where(np.isnan(phi), np.inf, phi)
+        return normal, width
+
+    def on_axes(self, rows):
+        """The rows whose touches on each cylinder or line, ``AXIS_TOUCHES`` or more, may fit one axis at its angle
+        to each plane three or more touches lie on (:func:`fit_an_axis`)."""
+        keep = np.ones(len(rows), bool)
+        n = rows.shape[1]
+        planes = np.flatnonzero(np.array(self.core) == "plane")
         for s in np.flatnonzero(np.array(self.core) == "line"):
             on = rows == s
             big = on.sum(axis=1) >= AXIS_TOUCHES
             if not big.any():
                 continue
-            sets, inverse = np.unique(on[big], axis=0, return_inverse=True)
-            size = sets.sum(axis=1)
+            # A set: the touches on the line, then those on each plane that three or more lie on.
+            tied = [on] + [(rows == e) & ((rows == e).sum(axis=1) >= 3)[:, None] for e in planes]
+            sets, inverse = np.unique(np.concatenate(tied, axis=1)[big], axis=0, return_inverse=True)
+            size = sets[:, :n].sum(axis=1)
             fits = np.ones(len(sets), bool)
-            # The smallest sets first: a set holding one that fits no axis fits none.
+            # The smallest first: a set holding one that fits no axis fits none.
             for m in np.unique(size):
                 misfits = sets[~fits].astype(int)
                 holds = (sets.astype(int) @ misfits.T == misfits.sum(axis=1)).any(axis=1)
                 fits &= ~holds
                 now = np.flatnonzero((size == m) & fits)
                 if len(now):
-                    fits[now] = fit_an_axis([self.places[k] for k in sets[now]], self.offsets[s], self.reach[s])
+                    fits[now] = fit_an_axis([self.places[sets[g, :n]] for g in now], self.offsets[s],
+                                            self.reach[s], self.bands(s, planes, sets[now, n:]))
             keep[np.flatnonzero(big)[~fits[inverse.ravel()]]] = False
         return rows[keep]
 
+    def bands(self, s, planes, on):
+        """The bands the axis of line element s lies in, for each set of touches ``on`` (G, P n) on the
+        ``planes`` (P element indices): each plane's normal and its cone's width (:meth:`normals`) and the axis's
+        angle to the plane's normal (rad, of lines, fixture frame): (G, P, 3), (G, P), (G, P)."""
+        normal, width = self.normals(planes, on)
+        angle = np.arccos(np.minimum(1.0, np.abs(np.array([self.direction[e] for e in planes]).reshape(-1, 3)
+                                                 @ self.direction[s])))
+        return normal, width, np.broadcast_to(angle, width.shape)
 
-def fit_an_axis(sets, radius, reach):
+
+def fit_an_axis(sets, radius, reach, bands=None):
     """Whether each set of touches (list of (m, 3)) may lie within ``reach`` of one cylinder of ``radius``
-    (mm; 0: a line): False only where a branch and bound over the axis's direction leaves none.
+    (mm; 0: a line): False only where a branch and bound over the axis's direction leaves none. ``bands``:
+    directions n (G, B, 3) for the G sets, their widths phi (G, B) and angles (G, B), rad: the axis's angle to a
+    line within phi of n is that angle (:meth:`Tables.bands`).
 
     Directions, up to sign, are the points of three faces of the cube about the origin (|x|, |y| or |z| the
     largest, 1); a square cell of half-width h holds directions within ``beta = sqrt(2) h`` of its middle's a0
@@ -198,7 +246,8 @@ def fit_an_axis(sets, radius, reach):
     hi_0^2, hi_i^2 - lo_0^2]``: two such slabs (touch 0 the farthest from m, touch 1 the farthest from it,
     touch 2 the farthest off their line) hold c' in a parallelogram, and every touch's distance from a point of
     it must meet its ``[lo, hi]``; and a0 must lie within ``beta`` of each of the set's narrowest cones about
-    its pairs' lines (as the quads' test). A cell that fails is dropped, the others split in four."""
+    its pairs' lines (as the quads' test), and its angle to each band's n within ``beta + phi`` of the band's
+    (the angle of lines obeys the triangle inequality). A cell that fails is dropped, the others split in four."""
     sizes = np.array([len(p) for p in sets])
     M = sizes.max()
     points = np.zeros((len(sets), M, 3))
@@ -213,6 +262,8 @@ def fit_an_axis(sets, radius, reach):
     narrow = np.argsort(cone, axis=1)[:, :AXIS_PAIRS]
     cone = np.take_along_axis(cone, narrow, axis=1)
     lines = np.take_along_axis(lines, narrow[..., None], axis=1)
+    normal, width, angle = (np.zeros((len(sets), 0, 3)), np.zeros((len(sets), 0)), np.zeros((len(sets), 0))) \
+        if bands is None else bands
     # The first cells: (set, face, u, v), half-width h.
     side = (2 * np.arange(AXIS_CELLS) + 1) / AXIS_CELLS - 1.0
     face, u, v = (x.ravel() for x in np.meshgrid(np.arange(3), side, side, indexing="ij"))
@@ -228,6 +279,9 @@ def fit_an_axis(sets, radius, reach):
         wide = cone + beta + SLACK
         least = np.where(wide < np.pi / 2.0, np.cos(np.minimum(wide, np.pi / 2.0)), 0.0)  # |a0.line| in each cone
         keep = np.all(np.abs(lines[g] @ a0[:, :, None])[..., 0] >= least[g], axis=1)
+        if width.shape[1]:
+            off = np.arccos(np.clip(np.abs(normal[g] @ a0[:, :, None])[..., 0], 0.0, 1.0))
+            keep &= np.all(np.abs(off - angle[g]) <= width[g] + beta + SLACK, axis=1)
         g, face, u, v, a0 = g[keep], face[keep], u[keep], v[keep], a0[keep]
         keep = _axis_cells(points[g], mask[g], far[g], a0, beta, radius, reach)
         g, face, u, v = g[keep], face[keep], u[keep], v[keep]

@@ -109,6 +109,7 @@ class Regions:
     cells: list = field(default_factory=list)
     left: int = 0
     weak: object = None  # what ``stop`` returned where the search stopped (a pose too weak to judge)
+    nearest: tuple = None  # the refined pose of least cost, passing or not: where none passes, the nearest to it
 
 
 class WeakPose(Exception):
@@ -178,18 +179,16 @@ def measured_normal(points, reach):
     (n,) mm of the plane, whatever the pose: ``(n*, phi)``, every unit n with ``|n.(p_i - p_j)| <= r_i + r_j``
     for every pair lying within phi of +n* or -n*; None where the touches leave it open.
 
-    Summed over the k pairs, ``n^T P n <= k`` with ``P = sum d d^T / (r_i + r_j)^2`` (d = p_j - p_i); with n* the
-    eigenvector of P's least eigenvalue, ``n = cos(phi) n* + sin(phi) m`` has ``n^T P n >= sin^2(phi)
-    lambda_2``, so ``sin^2(phi) <= k / lambda_2``. Tighter, pair by pair: such an n on n*'s side is ``(n* + u) /
+    First :func:`normal_cones`' bound. Tighter, pair by pair: such an n on n*'s side is ``(n* + u) /
     |n* + u|`` with u across n* and ``|n* + u| = 1 / (n.n*) <= 1 / cos(phi)``, so every pair's ``|(n* +
     u).d| <= (r_i + r_j) / cos(phi)``: u lies in a polygon (the pairs' slabs), within its farthest vertex's
     ``|u| = tan`` of n's angle from n*."""
+    n, phi = normal_cones(points[None], reach[None], np.ones((1, len(points)), bool))
+    if np.isnan(phi[0]):
+        return None
+    n, phi = n[0], float(phi[0])
     i, j = np.triu_indices(len(points), 1)
     d = (points[j] - points[i]) / (reach[i] + reach[j])[:, None]
-    lam, vec = np.linalg.eigh(d.T @ d)
-    if not lam[1] > len(i):
-        return None
-    n, phi = vec[:, 0], float(np.arcsin(np.sqrt(len(i) / lam[1])))
     # The slabs' edges a.u = b (both sides of each pair's), their corners where two meet, the corners in every slab.
     along, across = d @ n, d @ np.column_stack(perpendicular_basis(n))
     a = np.concatenate([across, across])
@@ -203,6 +202,23 @@ def measured_normal(points, reach):
     if inside.any():
         phi = min(phi, float(np.arctan(np.linalg.norm(corners[inside], axis=1).max())))
     return n, phi
+
+
+def normal_cones(points, reach, mask):
+    """For each set of touches (G, n, 3) (``mask`` (G, n): the set's), each within ``reach`` (G, n) mm of a
+    plane, whatever the pose: n* (G, 3) and phi (G,), rad, every unit n with ``|n.(p_i - p_j)| <= r_i + r_j``
+    for every pair lying within phi of +n* or -n* (nan where the touches leave it open).
+
+    Summed over the k pairs, ``n^T P n <= k`` with ``P = sum d d^T / (r_i + r_j)^2`` (d = p_j - p_i); with n* the
+    eigenvector of P's least eigenvalue, ``n = cos(phi) n* + sin(phi) m`` has ``n^T P n >= sin^2(phi)
+    lambda_2``, so ``sin^2(phi) <= k / lambda_2``."""
+    i, j = np.triu_indices(points.shape[1], 1)
+    both = mask[:, i] & mask[:, j]
+    d = np.where(both[..., None], (points[:, j] - points[:, i]) / (reach[:, i] + reach[:, j])[..., None], 0.0)
+    lam, vec = np.linalg.eigh(np.einsum("gki,gkj->gij", d, d))
+    k = both.sum(axis=1)
+    closed = lam[:, 1] > k
+    return vec[:, :, 0], np.where(closed, np.arcsin(np.sqrt(k / np.where(closed, lam[:, 1], np.inf))), np.nan)
 
 
 def turn_bound(fixed, measured, reach, sets):
@@ -1078,9 +1094,12 @@ class Tree:
         leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget, level_tries)
         if leaves is None:
             return Regions(complete=False, reason=reason, cells=kept)
-        fraction = LEAF_FRACTION
+        fraction, nearest = LEAF_FRACTION, None
         for _ in range(RESOLVE_ROUNDS + 1):
             found = self.found(leaves)
+            if found and (nearest is None or found[0].cost < nearest.cost):
+                nearest = found[0]
+            nearest_pose = nearest.pose if nearest else None
             # A region is settled when its pose passes and every pose of it that may pass lies near that one
             # (or its leaves are as fine as they get); else it may hold another pose: its leaves split finer.
             fine = fraction * max(self.root, LEAF_MM / LEAF_FRACTION) <= LEAF_FRACTION * self.root
@@ -1091,7 +1110,7 @@ class Tree:
                          if not region.passes or (region.extent_mm > SETTLED_MM + 2.0 * region.valley_mm and not fine
                                                   and not partial)]
             if not unsettled:
-                return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept)
+                return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept, nearest=nearest_pose)
             # Regions that pass but reach farther than a patch's widening may be a weak pose's valley.
             wide = [k for k in unsettled if found[k].passes and found[k].extent_mm > EXTENT_WIDENING_MAX_MM]
             wide.sort(key=lambda k: -found[k].extent_mm)  # the widest first: the likeliest to be weak
@@ -1111,7 +1130,7 @@ class Tree:
         else:
             reason = "a region may hold a pose that passes far from the one found in it"
         return Regions([r.pose for r in found], [r.extent_mm for r in found], complete=False, reason=reason,
-                       cells=kept)
+                       cells=kept, nearest=nearest_pose)
 
     def found(self, leaves):
         """The regions of joined leaves (:class:`Region`), best first."""

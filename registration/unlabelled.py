@@ -143,13 +143,17 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
                 out.append((image, problem_of(image), dataclasses.replace(regions, poses=poses)))
         return out
 
-    def searched(keep):
-        """Each admitted assignment of the touches ``keep`` (a mask; the others left out, None in it) whose
-        search leaves a region, with its problem and regions; the reason the assignments were not told (else
-        ""); the assignments kept per touch."""
+    def searched(keep, leaves=None):
+        """Each assignment of the touches ``keep`` (a mask; the others left out, None in it) whose search leaves a
+        region, with its problem and regions: the ``leaves`` given (assignments of those touches), else every one
+        admitted; the reason the assignments were not told (else ""); the assignments kept per touch; at the
+        refined pose nearest to passing of any search, each touch's distance (mm) from its feature, and the
+        assignment (None where no search refined a pose)."""
         q = threshold / sigma_mm**2
-        leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance, q,
-                                        float(np.sqrt(threshold)), [to for *_, to in group])
+        reason, kept = "", []
+        if leaves is None:
+            leaves, reason, kept = admitted(groups, surfaces, points[keep], ball_radius_mm, tolerance, q,
+                                            float(np.sqrt(threshold)), [to for *_, to in group])
         if reason or len(leaves) > MAX_SEARCHED:
             # Shape alone leaves too many: the poses tell them (one of each orbit, turned below).
             leaves, reason, kept = face_search(surfaces, points[keep], ball_radius_mm, tolerance, q, threshold, group)
@@ -162,20 +166,26 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
             assignment = tuple(assignment)
             problem = problem_of(assignment)
             trees.append((assignment, problem, *stand_in_tree(problem, threshold)))
-        found, loose = [], False
+        found, loose, nearest = [], False, (np.inf, None)
         # The assignments that fix a pose first: one that does not and leaves a region makes the search incomplete,
         # and the others that do not (a continuum each, slow to search) can then change nothing that is proven.
         for assignment, problem, tree, left in sorted(trees, key=lambda item: not item[2].fixes_pose):
             if loose and not tree.fixes_pose:
                 break
             regions = tree.regions(partial=left > 0)
+            if regions.nearest is not None:
+                r, _ = problem.evaluate(*regions.nearest)
+                if r @ r < nearest[0]:
+                    off = np.zeros(len(points))
+                    off[keep] = np.abs(r[[np.flatnonzero(problem.row_touch == i)[0] for i in index[keep]]])
+                    nearest = (r @ r, (off, assignment))
             if not tree.fixes_pose and (regions.poses or not regions.complete):
                 regions.complete, loose = False, True
                 regions.reason = "the touches fit an assignment of them that does not fix a pose"
             if regions.poses or not regions.complete:
                 found.append((assignment, problem, regions))
                 found += turned(assignment, regions)
-        return found, reason, kept
+        return found, reason, kept, nearest[1]
 
     # The surfaces' symmetries turn one assignment's poses into another's: only where nothing else (labelled
     # touches, sensors, a printed part's deviations, each tied to its own feature) tells the surfaces apart.
@@ -185,16 +195,21 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
     threshold = threshold_mm2(problem_of([surfaces[0].id] * len(points)))
     out = Solutions()
     everyone = np.ones(len(points), bool)
-    leaves, reason, out.cells = searched(everyone)
+    leaves, reason, out.cells, near = searched(everyone)
     out.search, out.reason = ("incomplete", reason) if reason else ("complete", "")
     found = [s for assignment, problem, regions in leaves for s in _solved(problem, assignment, out, regions)]
-    for i in range(len(points) if not (found or reason) else 0):
-        # No pose passes under any assignment: each touch left out in turn (one that fits no feature); the first
-        # that leaves a region gives its poses, refined with the touch on its nearest feature there, for what the
-        # verdict says of them (inconsistent, and which touches fit no feature).
+    # No pose passes under any assignment: each touch left out in turn (one that fits no feature); the first that
+    # leaves a region gives its poses, refined with the touch on its nearest feature there, for what the verdict
+    # says of them (inconsistent, and which touches fit no feature). Where a search refined a pose nearest to
+    # passing, the touches farthest off their features there first, each under that pose's assignment (the rest
+    # keep their features); then, or else, under every assignment the rest admit.
+    order = np.argsort(-near[0]) if near is not None else range(len(points))
+    tries = [(i, [tuple(np.array(near[1], dtype=object)[np.arange(len(points)) != i])]) for i in order] \
+        if near is not None else []
+    for i, only in tries + [(i, None) for i in order] if not (found or reason) else ():
         rest = everyone.copy()
         rest[i] = False
-        for assignment, problem, regions in searched(rest)[0]:
+        for assignment, problem, regions in searched(rest, only)[0]:
             for R, t in regions.poses:
                 pose = np.eye(4)
                 pose[:3, :3], pose[:3, 3] = R, t

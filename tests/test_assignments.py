@@ -5,7 +5,7 @@ Independent answers: touches drawn on each feature's patch and moved off its sur
 or out, at a random pose, so that each test's premise holds at its edge: their own assignment must be admitted.
 Each quad test alone against quads drawn the same way, and against quads that plainly cannot lie on the element;
 the boxes' distances against sampled points; the axis search against touches on a cylinder or a line, with and
-without a plane's touches among them, and its ranges against the exact distance from a tilted line.
+without a plane's touches among them or beside them, and its ranges against the exact distance from a tilted line.
 """
 
 import numpy as np
@@ -197,6 +197,53 @@ def test_a_cylinders_touches_with_the_planes_fit_no_axis():
         sets.append(np.vstack([on, flat[rng.choice(len(flat), rng.integers(1, 3), replace=False)]])
                     @ random_rotation(rng).T)
     assert (~assignments.fit_an_axis(sets, radius, REACH_MM)).mean() > 0.9
+
+
+def test_an_axis_keeps_its_angle_to_a_planes_normal():
+    """200 layouts of the inclined plane and cylinder, 5 to 8 touches on the cylinder and 3 to 6 on the plane,
+    each off its surface by its whole reach, at a random pose: the cylinder's touches fit an axis in the band the
+    plane's touches leave (:meth:`.assignments.Tables.bands`) every time, and in most layouts none in the band
+    turned by 0.3 rad from the fixture's angle (the band, not the touches alone, rules those out)."""
+    features = _features("inclined-plane-cylinder")
+    cylinder, plane = features["cylinder"], features["plane"]
+    rng = np.random.default_rng(23)
+    sets, bands = [], []
+    for _ in range(LAYOUTS):
+        counts = {"cylinder": int(rng.integers(5, 9)), "plane": int(rng.integers(3, 7))}
+        points, ids = _drawn(features, counts, rng)
+        on = np.array(ids) == "plane"
+        tables = assignments.Tables([cylinder, plane], np.array([cylinder.core()[3], 0.0]), points, None, 1.0,
+                                    REACH_MM)
+        sets.append(points[~on])
+        bands.append(tables.bands(0, np.array([1]), on[None]))
+    normal, width, angle = (np.concatenate(b) for b in zip(*bands))
+    radius = cylinder.core()[3]
+    assert np.isfinite(width).all()
+    assert assignments.fit_an_axis(sets, radius, REACH_MM, (normal, width, angle)).all()
+    assert (~assignments.fit_an_axis(sets, radius, REACH_MM, (normal, width, angle + 0.3))).mean() > 0.9
+
+
+def test_planes_touches_keep_their_normals_angle():
+    """200 layouts of the v-block's three faces, 3 to 6 touches each, each off its face by its whole reach, at
+    a random pose: the true assignment keeps every two faces' normals at their angle (:meth:`.assignments.Tables.
+    at_angles`) every time; with one touch of a groove and one of the end swapped (no test but the angles
+    applied), most do not."""
+    features = _features("v-block")
+    ids = ["groove_a", "groove_b", "end"]
+    rng = np.random.default_rng(24)
+    kept, swapped = 0, 0
+    for _ in range(LAYOUTS):
+        counts = {fid: int(rng.integers(3, 7)) for fid in ids}
+        points, drawn = _drawn(features, counts, rng)
+        tables = assignments.Tables([features[f] for f in ids], np.zeros(3), points, None, 1.0, REACH_MM)
+        row = np.array([ids.index(f) for f in drawn])
+        kept += len(tables.at_angles(row[None]))
+        wrong = row.copy()
+        a, b = rng.choice(np.flatnonzero(row == rng.integers(0, 2))), rng.choice(np.flatnonzero(row == 2))
+        wrong[a], wrong[b] = row[b], row[a]
+        swapped += len(tables.at_angles(wrong[None]))
+    assert kept == LAYOUTS
+    assert swapped < 0.1 * LAYOUTS
 
 
 def test_a_touchs_distance_from_a_tilted_axis_lies_in_its_range():

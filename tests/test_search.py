@@ -17,7 +17,7 @@ from fixturecad.registration.patches import box_corners, patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, rotation_boxes, row_span, search, shell_box,
+                                            measured_normal, normal_cones, rotation_boxes, row_span, search, shell_box,
                                             normal_signs, stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
@@ -408,7 +408,8 @@ def test_a_plane_s_measured_normal_holds_every_normal_that_fits_its_touches():
     every one under which each pair of touches fits within their reaches (``|n.d| <= r_i + r_j``) lies within
     :func:`measured_normal`'s phi of n*, and in most layouts one lies beyond 0.9 phi (phi is about the farthest
     such normal, tighter than the eigenvalue bound). It fails when the slabs' 1/cos(phi) is left out, or phi is
-    taken 3 % narrower."""
+    taken 3 % narrower. :func:`normal_cones`, the touches among three others it masks out, gives the eigenvalue
+    bound itself."""
     rng = np.random.default_rng(19)
     near, checked = 0, 0
     for _ in range(200):
@@ -421,9 +422,13 @@ def test_a_plane_s_measured_normal_holds_every_normal_that_fits_its_touches():
         n, phi = normal
         i, j = np.triu_indices(count, 1)
         d, e = points[j] - points[i], reach[i] + reach[j]
-        lam = np.linalg.eigvalsh((d / e[:, None]).T @ (d / e[:, None]))
+        lam, vec = np.linalg.eigh((d / e[:, None]).T @ (d / e[:, None]))
         wide = np.arcsin(min(1.0, np.sqrt(len(i) / lam[1])))
         assert phi <= wide + 1e-12
+        among = rng.permutation(count + 3)
+        cone = normal_cones(np.concatenate([points, rng.normal(0.0, 30.0, (3, 3))])[among][None],
+                            np.concatenate([reach, [0.01] * 3])[among][None], (among < count)[None])
+        assert abs(abs(cone[0][0] @ vec[:, 0]) - 1.0) < 1e-9 and cone[1][0] == pytest.approx(wide, abs=1e-12)
         m = rng.normal(size=(20000, 3))
         m -= (m @ n)[:, None] * n
         m /= np.linalg.norm(m, axis=1, keepdims=True)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from fixturecad.registration import assignments
+from fixturecad.registration.defaults import SENSOR_LEVER_MM
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.generate import write_register_script
 from fixturecad.registration.patches import patch_points
@@ -160,6 +161,34 @@ def test_a_touch_moved_off_its_feature_is_the_culprit(name, counts):
     assert result["culprit"] == 5
     assert [a["feature"] for a in result["assignment"]] == own
     assert _within(result["flagged"][0]["pose"], truth, 0.05, 0.05)
+
+
+@pytest.mark.parametrize("name,counts", [("v-block", {"groove_a": 4, "groove_b": 4, "end": 4}),
+                                         ("inclined-plane-cylinder", {"plane": 6, "cylinder": 6})])
+def test_a_touch_just_off_is_left_out_first_under_the_nearest_poses_assignment(name, counts, monkeypatch):
+    """Touch 5 moved out of its feature by 1.5 times the root of the test's threshold (the noise-free rest fit):
+    no pose passes, yet the search refines one nearest to passing, where touch 5 lies farthest off; so it is left
+    out first, under that pose's assignment: one labelled search beyond the full search's (in their order,
+    touch 5 would be left out sixth, each time under every assignment the rest admit), and the verdict lists it
+    among the touches whose removal explains it (so near, others' do too)."""
+    from fixturecad.registration import unlabelled
+    from fixturecad.registration.search import threshold_mm2
+
+    _, features, truth, touches = _case(name, counts, 3)
+    points = np.concatenate(list(touches.values()))
+    own = [fid for fid, n in counts.items() for _ in range(n)]
+    local = (points[5] - truth[:3, 3]) @ truth[:3, :3]
+    problem = unlabelled.assigned_problem([], features, points, np.arange(len(points)), own, 0.0, SIGMA_MM,
+                                          SENSOR_LEVER_MM, None)
+    points[5] += 1.5 * np.sqrt(threshold_mm2(problem)) * truth[:3, :3] @ features[own[5]].normal_at(local[None])[0]
+    admitted, searches = [], []
+    real_admitted, real_tree = unlabelled.admitted, unlabelled.stand_in_tree
+    monkeypatch.setattr(unlabelled, "admitted", lambda *a: admitted.append(real_admitted(*a)) or admitted[-1])
+    monkeypatch.setattr(unlabelled, "stand_in_tree", lambda *a: searches.append(1) or real_tree(*a))
+    result = register_touches(features, {}, unlabelled=points, sigma_mm=SIGMA_MM)
+    assert result["status"] == "inconsistent" and result["search"] == "complete"
+    assert 5 in [f["touch"] for f in result["flagged"]]
+    assert len(admitted) == 1 and len(searches) == len(admitted[0][0]) + 1
 
 
 def test_assignments_not_told_say_incomplete_and_give_poses_that_fit(monkeypatch):
