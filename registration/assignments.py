@@ -42,7 +42,7 @@ AXIS_TOUCHES = 5  # a cylinder's or line's touches, this many or more, searched 
 AXIS_CELLS = 4  # the axis search's first cells: this many a side on each of three cube faces ...
 AXIS_LEVELS = 8  # ... split this many times at most (a cell then 0.0014 rad across) ...
 AXIS_KEPT = 2000  # ... while a set keeps at most this many cells (it is taken to fit past either)
-AXIS_PAIRS = 6  # the narrowest cones about the set's pairs' lines that bound the axis search's cells (all of nine touches')
+AXIS_PAIRS = 36  # the narrowest cones about the set's pairs' lines that bound the axis search's cells (all of nine touches')
 CHUNK = 4096  # rows tested at once against the quads
 SLACK = 1e-9  # relative: rounding kept on the tests' side
 
