@@ -186,9 +186,10 @@ class Tables:
         on = on.reshape(G, len(planes), n)
         normal, width = np.zeros((G, len(planes), 3)), np.full((G, len(planes)), np.inf)
         for k, e in enumerate(planes):
-            normal[:, k], phi = normal_cones(np.broadcast_to(self.places, (G, n, 3)),
-                                             np.full((G, n), self.reach[e]), on[:, k])
-            width[:, k] = np.where(np.isnan(phi), np.inf, phi)
+            some = np.flatnonzero(on[:, k].sum(axis=1) >= 3)
+            normal[some, k], phi = normal_cones(np.broadcast_to(self.places, (len(some), n, 3)),
+                                                np.full((len(some), n), self.reach[e]), on[some, k])
+            width[some, k] = np.where(np.isnan(phi), np.inf, phi)
         return normal, width
 
     def on_axes(self, rows):
