@@ -172,8 +172,8 @@ class Tables:
         normal, width = self.normals(planes, np.concatenate([rows == e for e in planes], axis=1))
         keep = np.ones(len(rows), bool)
         for a, b in itertools.combinations(range(len(planes)), 2):
-            fixed = np.arccos(min(1.0, abs(float(self.direction[planes[a]] @ self.direction[planes[b]]))))
-            measured = np.arccos(np.clip(np.abs(np.sum(normal[:, a] * normal[:, b], axis=1)), 0.0, 1.0))
+            fixed = line_angle(self.direction[planes[a]], self.direction[planes[b]])
+            measured = line_angle(normal[:, a], normal[:, b])
             keep &= np.abs(measured - fixed) <= width[:, a] + width[:, b] + SLACK
         return rows[keep]
 
@@ -225,8 +225,7 @@ class Tables:
         ``planes`` (P element indices): each plane's normal and its cone's width (:meth:`normals`) and the axis's
         angle to the plane's normal (rad, of lines, fixture frame): (G, P, 3), (G, P), (G, P)."""
         normal, width = self.normals(planes, on)
-        angle = np.arccos(np.minimum(1.0, np.abs(np.array([self.direction[e] for e in planes]).reshape(-1, 3)
-                                                 @ self.direction[s])))
+        angle = line_angle(np.array([self.direction[e] for e in planes]).reshape(-1, 3), self.direction[s])
         return normal, width, np.broadcast_to(angle, width.shape)
 
 
@@ -281,7 +280,7 @@ def fit_an_axis(sets, radius, reach, bands=None):
         least = np.where(wide < np.pi / 2.0, np.cos(np.minimum(wide, np.pi / 2.0)), 0.0)  # |a0.line| in each cone
         keep = np.all(np.abs(lines[g] @ a0[:, :, None])[..., 0] >= least[g], axis=1)
         if width.shape[1]:
-            off = np.arccos(np.clip(np.abs(normal[g] @ a0[:, :, None])[..., 0], 0.0, 1.0))
+            off = line_angle(normal[g], a0[:, None])
             keep &= np.all(np.abs(off - angle[g]) <= width[g] + beta + SLACK, axis=1)
         g, face, u, v, a0 = g[keep], face[keep], u[keep], v[keep], a0[keep]
         keep = _axis_cells(points[g], mask[g], far[g], a0, beta, radius, reach)
@@ -409,9 +408,13 @@ def _line(P, radius, reach):
     cone, unit = pair_cones(P[:, j] - P[:, i], radius, reach)  # (Q, 6)
     fits = np.ones(len(P), bool)
     for a, b in itertools.combinations(range(6), 2):
-        cosine = np.clip(np.abs(np.sum(unit[:, a] * unit[:, b], axis=1)), 0.0, 1.0)
-        fits &= np.arccos(cosine) <= cone[:, a] + cone[:, b] + SLACK
+        fits &= line_angle(unit[:, a], unit[:, b]) <= cone[:, a] + cone[:, b] + SLACK
     return fits
+
+
+def line_angle(u, v):
+    """The angle (rad, 0 to pi/2) between the lines along unit vectors u and v (..., 3, broadcast)."""
+    return np.arccos(np.clip(np.abs(np.sum(u * v, axis=-1)), 0.0, 1.0))
 
 
 def pair_cones(d, radius, reach):

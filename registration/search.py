@@ -1099,7 +1099,6 @@ class Tree:
             found = self.found(leaves)
             if found and (nearest is None or found[0].cost < nearest.cost):
                 nearest = found[0]
-            nearest_pose = nearest.pose if nearest else None
             # A region is settled when its pose passes and every pose of it that may pass lies near that one
             # (or its leaves are as fine as they get); else it may hold another pose: its leaves split finer.
             fine = fraction * max(self.root, LEAF_MM / LEAF_FRACTION) <= LEAF_FRACTION * self.root
@@ -1110,7 +1109,8 @@ class Tree:
                          if not region.passes or (region.extent_mm > SETTLED_MM + 2.0 * region.valley_mm and not fine
                                                   and not partial)]
             if not unsettled:
-                return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept, nearest=nearest_pose)
+                return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept,
+                               nearest=nearest and nearest.pose)
             # Regions that pass but reach farther than a patch's widening may be a weak pose's valley.
             wide = [k for k in unsettled if found[k].passes and found[k].extent_mm > EXTENT_WIDENING_MAX_MM]
             wide.sort(key=lambda k: -found[k].extent_mm)  # the widest first: the likeliest to be weak
@@ -1130,7 +1130,7 @@ class Tree:
         else:
             reason = "a region may hold a pose that passes far from the one found in it"
         return Regions([r.pose for r in found], [r.extent_mm for r in found], complete=False, reason=reason,
-                       cells=kept, nearest=nearest_pose)
+                       cells=kept, nearest=nearest and nearest.pose)
 
     def found(self, leaves):
         """The regions of joined leaves (:class:`Region`), best first."""
