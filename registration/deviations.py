@@ -19,6 +19,7 @@ import numpy as np
 
 from .datums import frame_change
 from .elements import cross
+from .patches import box_corners, patch_box, patch_points
 from .pose import motion_from_twist, vector_from_rotation
 from .tolerance import coordinates, deviated, modes, moved, random_coordinates
 
@@ -75,6 +76,18 @@ class FixtureTolerance:
         eigen, vectors = np.linalg.eigh(self.covariance)
         kept = eigen > ROOT_CUTOFF * max(eigen.max(initial=0.0), 1e-300)
         self.root = vectors[:, kept] * np.sqrt(eigen[kept])
+        self._largest = {}
+
+    def largest_variance(self, feature):
+        """The largest variance (mm^2) of how far the feature's deviation moves a touch on its patch across its
+        rows (:func:`largest_row_variance`): at the patch box's corners for a plane, where it is convex, on the
+        patch grid otherwise. Computed once per feature (every search on the part asks it again)."""
+        known, value = self._largest.get(feature.id, (None, None))
+        if known is not feature:
+            points = box_corners(*patch_box(feature)) if feature.kind == "plane" else patch_points(feature)
+            value = largest_row_variance(self, feature, points)
+            self._largest[feature.id] = feature, value
+        return value
 
     @property
     def point_sigma_mm(self):

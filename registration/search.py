@@ -59,10 +59,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .elements import cross, distance_and_outward, perpendicular_basis
-from .deviations import largest_row_variance
 from .least_squares import levenberg_marquardt
 from .mobility import matrix_rank
-from .patches import box_corners, patch_box, patch_points
+from .patches import patch_box
 from .pose import point_covariances, rotation_from_vector, skew, vector_from_rotation
 from .problem import Problem, subset
 from .sensor_bounds import Printed, SensorBounds, bounded
@@ -1389,14 +1388,8 @@ def least_over_box(rel, half, direction, point, aligned, radius):
 
 def deviation_bound(tolerance, feature, q):
     """A touch's deviation bound ``e = sqrt(q D)`` (mm) on a printed feature, ``D`` the largest variance of the
-    feature's deviation across its rows over its patch: at the patch box's corners for a plane, where it is
-    convex, on the patch grid otherwise."""
-    if feature.kind == "plane":
-        low, high = patch_box(feature)
-        points = box_corners(low, high)
-    else:
-        points = patch_points(feature)
-    return np.sqrt(q * largest_row_variance(tolerance, feature, points))
+    feature's deviation across its rows over its patch (:meth:`.deviations.FixtureTolerance.largest_variance`)."""
+    return np.sqrt(q * tolerance.largest_variance(feature))
 
 
 @dataclass
