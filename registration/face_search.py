@@ -146,8 +146,8 @@ def _contracted(C, a, g, ylo, yhi, low, high, plane, direction, level, reach):
     normal = direction[only]
     at = level[only] - np.einsum("knd,knd->kn", normal, a)
     width = reach[only] + g
-    return propagated(np.where(on_plane[..., None], normal, 0.0), np.where(on_plane, at - width, -np.inf),
-                      np.where(on_plane, at + width, np.inf), ylo, yhi, 1)
+    return propagated([(np.where(on_plane[..., None], normal, 0.0), np.where(on_plane, at - width, -np.inf),
+                       np.where(on_plane, at + width, np.inf))], ylo, yhi, 1)
 
 
 def _least_of_orbits(found, surfaces, group):

@@ -838,8 +838,17 @@ class Tree:
         core). Each slab ``l <= g.y <= u`` narrows each axis of the box to what the other axes leave (interval
         propagation, in rounds over all slabs at once). ``reach`` (K, n): the ``s_i``; ``value`` (K, rows): the
         flat rows at ``y = 0``."""
-        g = np.broadcast_to(self.row_unit @ self.Q, (len(c.v), len(self.row_touch), 3))
-        low, high = -value - reach[:, self.row_touch], -value + reach[:, self.row_touch]
+        # The flat rows' and the slabs' directions are every cell's: one array of them, not one a cell.
+        g = [self.row_unit @ self.Q]
+        low, high = [-value - reach[:, self.row_touch]], [-value + reach[:, self.row_touch]]
+        if len(self.slab_touch):
+            i = self.slab_touch
+            along = np.einsum("si,ksi->ks", self.slab_normal, c.a[:, i] - self.anchor[i])
+            radius = self.offset[i][None] + reach[:, i]
+            g.append(self.slab_normal @ self.Q)
+            low.append(-radius - along)
+            high.append(radius - along)
+        slabs = [(np.concatenate(g), np.concatenate(low, axis=1), np.concatenate(high, axis=1))]
         if len(self.pairs):
             i, j = self.pairs.T
             k, m = self.pair_index.T
@@ -848,19 +857,12 @@ class Tree:
             near = np.maximum(self.offset[None] - reach, 0.0) ** 2
             far = (self.offset[None] + reach) ** 2
             constant = square[:, k] - square[:, m]
-            g = np.concatenate([g, on_axes(2.0 * (Pu[:, k] - Pu[:, m]), self.Q)], axis=1)
-            low = np.concatenate([low, near[:, i] - far[:, j] - constant], axis=1)
-            high = np.concatenate([high, far[:, i] - near[:, j] - constant], axis=1)
-        if len(self.slab_touch):
-            i = self.slab_touch
-            along = np.einsum("si,ksi->ks", self.slab_normal, c.a[:, i] - self.anchor[i])
-            radius = self.offset[i][None] + reach[:, i]
-            g = np.concatenate([g, np.broadcast_to(self.slab_normal @ self.Q, (len(c.v),) + self.slab_normal.shape)], axis=1)
-            low = np.concatenate([low, -radius - along], axis=1)
-            high = np.concatenate([high, radius - along], axis=1)
-        if not g.shape[1]:
+            slabs.append((on_axes(2.0 * (Pu[:, k] - Pu[:, m]), self.Q), near[:, i] - far[:, j] - constant,
+                          far[:, i] - near[:, j] - constant))
+        slabs = [slab for slab in slabs if len(slab[0]) and slab[0].shape[-2]]
+        if not slabs:
             return
-        c.ylo, c.yhi = propagated(g, low, high, c.ylo, c.yhi, CONTRACT_ROUNDS)
+        c.ylo, c.yhi = propagated(slabs, c.ylo, c.yhi, CONTRACT_ROUNDS)
 
     def narrowed(self, c):
         """Which cells' rotation boxes narrow to their model's ellipsoid, and the narrower boxes (v, w).
@@ -1320,26 +1322,54 @@ def shell_box(points, radius, width):
         A = np.linalg.pinv(g)
         mid, half = A @ (0.5 * (low + high)), np.abs(A) @ (0.5 * (high - low))
         lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
-    lo, hi = propagated(g[None], low[None], high[None], lo[None], hi[None], 2)
+    lo, hi = propagated([(g, low[None], high[None])], lo[None], hi[None], 2)
     return lo[0] + origin, hi[0] + origin
 
 
-def propagated(g, low, high, lo, hi, rounds):
-    """Boxes (K, 3) narrowed to slabs ``low <= g.y <= high`` (g (K, S, 3), low and high (K, S)): each slab
-    narrows each axis to what the box's other axes leave it, ``rounds`` times over all slabs at once."""
-    zero = np.abs(g) <= 1e-12
-    g = np.where(zero, 0.0, g)
+def propagated(slabs, lo, hi, rounds):
+    """Boxes (K, 3) narrowed to slabs ``low <= g.y <= high``: ``slabs`` a list of (g, low, high), g (S, 3) the
+    same for every box or (K, S, 3) each its own, low and high (K, S); each slab narrows each axis to what the
+    box's other axes leave it, ``rounds`` times over all slabs at once (g within 1e-12 of 0 taken as 0)."""
+    slabs = [(np.where(np.abs(g) <= 1e-12, 0.0, g), low, high) for g, low, high in slabs]
     for _ in range(rounds):
-        y_lo, y_hi = np.maximum(lo, -BIG_MM)[:, None], np.minimum(hi, BIG_MM)[:, None]
-        p, q = g * y_lo, g * y_hi
-        t_lo, t_hi = np.minimum(p, q), np.maximum(p, q)  # (K, S, 3)
-        # g_k y_k in [low - rest_hi, high - rest_lo], divided by g_k (its ends swapped when g_k < 0); an axis a
-        # slab does not hold is left as it is.
+        y_lo, y_hi = np.maximum(lo, -BIG_MM), np.minimum(hi, BIG_MM)
+        narrowed = [(_shared_narrowed if g.ndim == 2 else _own_narrowed)(g, low, high, y_lo, y_hi)
+                    for g, low, high in slabs]
+        lo = np.maximum(lo, across(np.maximum, np.stack([a for a, _ in narrowed], axis=1)))
+        hi = np.minimum(hi, across(np.minimum, np.stack([b for _, b in narrowed], axis=1)))
+    return lo, hi
+
+
+def _own_narrowed(g, low, high, y_lo, y_hi):
+    """One round of :func:`propagated` over slabs each box has its own of (g (K, S, 3)): each axis's interval
+    (lo, hi) (K, 3) that the slabs leave it."""
+    p, q = g * y_lo[:, None], g * y_hi[:, None]
+    t_lo, t_hi = np.minimum(p, q), np.maximum(p, q)  # (K, S, 3)
+    # g_k y_k in [low - rest_hi, high - rest_lo], divided by g_k (its ends swapped when g_k < 0); an axis a slab
+    # does not hold is left as it is.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (low[..., None] - np.sum(t_hi, axis=2, keepdims=True) + t_hi) / g
+        b = (high[..., None] - np.sum(t_lo, axis=2, keepdims=True) + t_lo) / g
+    zero = g == 0.0
+    return (across(np.maximum, np.where(zero, -np.inf, np.minimum(a, b))),
+            across(np.minimum, np.where(zero, np.inf, np.maximum(a, b))))
+
+
+def _shared_narrowed(g, low, high, y_lo, y_hi):
+    """:func:`_own_narrowed` where every box shares the slabs' g (S, 3): the box's range of each g.y is two
+    products, and each axis's slabs are split by their g's sign on it, known once for all boxes (the {C-R-C}x6
+    design's searches a quarter faster)."""
+    gp, gn = np.maximum(g, 0.0), np.minimum(g, 0.0)
+    top, bottom = y_hi @ gp.T + y_lo @ gn.T, y_lo @ gp.T + y_hi @ gn.T  # (K, S): g.y's range over the box
+    lo, hi = np.empty_like(y_lo), np.empty_like(y_hi)
+    for k in range(3):
+        pos, neg = g[:, k] > 0.0, g[:, k] < 0.0
+        # g_k y_k in [low - (top - its own part), high - (bottom - its own)], divided by g_k.
         with np.errstate(divide="ignore", invalid="ignore"):
-            a = (low[..., None] - np.sum(t_hi, axis=2, keepdims=True) + t_hi) / g
-            b = (high[..., None] - np.sum(t_lo, axis=2, keepdims=True) + t_lo) / g
-        lo = np.maximum(lo, across(np.maximum, np.where(zero, -np.inf, np.minimum(a, b))))
-        hi = np.minimum(hi, across(np.minimum, np.where(zero, np.inf, np.maximum(a, b))))
+            a = (low - top + gp[:, k] * y_hi[:, k, None] + gn[:, k] * y_lo[:, k, None]) / g[:, k]
+            b = (high - bottom + gp[:, k] * y_lo[:, k, None] + gn[:, k] * y_hi[:, k, None]) / g[:, k]
+        lo[:, k] = np.max(np.concatenate([a[:, pos], b[:, neg]], axis=1), axis=1, initial=-np.inf)
+        hi[:, k] = np.min(np.concatenate([b[:, pos], a[:, neg]], axis=1), axis=1, initial=np.inf)
     return lo, hi
 
 

@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
+from scipy.optimize import linprog
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -17,7 +18,8 @@ from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, normal_cones, rotation_boxes, row_span, search, shell_box,
+                                            measured_normal, normal_cones, propagated, rotation_boxes, row_span, search,
+                                            shell_box,
                                             normal_signs, stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
@@ -675,6 +677,41 @@ def test_the_deviation_bound_holds_on_the_patch(name):
         freed = [tolerance.widened(fid, k).largest_variance(feature) for k in range(len(tolerance.modes[fid].names))]
         assert max(freed) > 100.0 * bound, (fid, bound, freed)
         assert tolerance.largest_variance(feature) == bound
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_slabs_narrow_a_box_as_a_linear_program_does(shared):
+    """One round of the slabs' propagation narrows each axis of each box to the intersection, over the slabs, of
+    the least and the greatest y_k that the box and that slab alone allow: scipy's linear program's, slab by
+    slab, on 20 boxes and 5 slabs (some of their directions 0 on an axis), the slabs' g the boxes' own or the
+    same for all."""
+    rng = np.random.default_rng(5)
+    K, S = 20, 5
+    g = rng.normal(size=(S, 3)) if shared else rng.normal(size=(K, S, 3))
+    g[..., 1, 2] = 0.0
+    g[..., 3, 0] = 0.0
+    lo = rng.uniform(-5, 0, (K, 3))
+    hi = lo + rng.uniform(0.5, 6, (K, 3))
+    centre = rng.uniform(lo, hi)
+    every = np.broadcast_to(g, (K, S, 3))
+    at = np.einsum("ksi,ki->ks", every, centre)
+    low, high = at - rng.uniform(0.1, 2, (K, S)), at + rng.uniform(0.1, 2, (K, S))
+    got_lo, got_hi = propagated([(g, low, high)], lo, hi, 1)
+    for k in range(K):
+        want_lo, want_hi = lo[k].copy(), hi[k].copy()
+        for s in range(S):
+            row = every[k, s]
+            for axis in range(3):
+                cost = np.eye(3)[axis]
+                for sign in (1.0, -1.0):
+                    out = linprog(sign * cost, A_ub=np.array([row, -row]), b_ub=[high[k, s], -low[k, s]],
+                                  bounds=list(zip(lo[k], hi[k])), method="highs")
+                    assert out.status == 0
+                    if sign > 0:
+                        want_lo[axis] = max(want_lo[axis], out.x[axis])
+                    else:
+                        want_hi[axis] = min(want_hi[axis], out.x[axis])
+        assert np.allclose(got_lo[k], want_lo, atol=1e-7) and np.allclose(got_hi[k], want_hi, atol=1e-7), k
 
 
 def test_leaves_are_joined_as_a_graph_library_joins_them():
