@@ -514,6 +514,10 @@ class Tree:
         if len(lines):
             self.aligned &= np.all(np.isclose(self.direction, self.Q[:, 2]) | np.isclose(self.direction, -self.Q[:, 2]),
                                    axis=1)
+        # The round touches whose distance holds some of the box's axes (every axis for a point core, the first two
+        # for a line core along the last; none for a line core across them), and those axes.
+        self.fixing = np.flatnonzero(self.round & ((self.core == "point") | self.aligned))
+        self.fixing_axes = np.where((self.core[self.fixing] == "point")[:, None], True, [True, True, False])
         # A round touch on a line core across the box's axes lies within its reach of a cylinder about the core, and so
         # between two planes along the core across each of the box's axes (:meth:`contract`): each such plane's unit
         # normal, the box's axis with its part along the core taken out.
@@ -754,17 +758,14 @@ class Tree:
         half = self.patch_half[None] + turn[..., None]
         lo, hi = middle - half, middle + half
         # ... and every round touch within its reach of its element: its core within that of its radius, on the
-        # axes its distance depends on: every axis for a point core, the first two for a line core along the
-        # last, none for a line core across the box's axes (the touch may lie anywhere along it).
-        if self.round.any():
-            core_reach = self.offset[None, self.round] + reach[:, self.round]
-            core = on_axes((self.anchor[self.round])[None] - c.a[:, self.round], self.Q)
-            point = (self.core[self.round] == "point")[:, None]
-            axes = np.where(point, True, np.where(self.aligned[self.round, None], [True, True, False], False))[None]
-            lo[:, self.round] = np.where(axes, np.maximum(lo[:, self.round], core - core_reach[..., None]),
-                                         lo[:, self.round])
-            hi[:, self.round] = np.where(axes, np.minimum(hi[:, self.round], core + core_reach[..., None]),
-                                         hi[:, self.round])
+        # axes its distance depends on (``fixing``; a line core across the box's axes: the touch may lie anywhere
+        # along it).
+        if len(self.fixing):
+            f = self.fixing
+            core_reach = (self.offset[f][None] + reach[:, f])[..., None]
+            core = on_axes(self.anchor[f][None] - c.a[:, f], self.Q)
+            lo[:, f] = np.where(self.fixing_axes, np.maximum(lo[:, f], core - core_reach), lo[:, f])
+            hi[:, f] = np.where(self.fixing_axes, np.minimum(hi[:, f], core + core_reach), hi[:, f])
         turned = np.abs(c.R @ self.Q) if self.centres else None
         for anchor, rel, half, lever in self.centres:
             spread = half @ turned + (c.delta * lever)[:, None]
