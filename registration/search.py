@@ -860,7 +860,7 @@ class Tree:
             constant = square[:, k] - square[:, m]
             slabs.append((on_axes(2.0 * (Pu[:, k] - Pu[:, m]), self.Q), near[:, i] - far[:, j] - constant,
                           far[:, i] - near[:, j] - constant))
-        slabs = [slab for slab in slabs if len(slab[0]) and slab[0].shape[-2]]
+        slabs = [slab for slab in slabs if slab[1].size]
         if not slabs:
             return
         c.ylo, c.yhi = propagated(slabs, c.ylo, c.yhi, CONTRACT_ROUNDS)
