@@ -1330,47 +1330,36 @@ def shell_box(points, radius, width):
 def propagated(slabs, lo, hi, rounds):
     """Boxes (K, 3) narrowed to slabs ``low <= g.y <= high``: ``slabs`` a list of (g, low, high), g (S, 3) the
     same for every box or (K, S, 3) each its own, low and high (K, S); each slab narrows each axis to what the
-    box's other axes leave it, ``rounds`` times over all slabs at once (g within 1e-12 of 0 taken as 0)."""
+    box's other axes leave it, ``rounds`` times over all slabs at once (g within 1e-12 of 0 taken as 0). A shared
+    g is neither copied per box nor split by sign per box."""
     slabs = [(np.where(np.abs(g) <= 1e-12, 0.0, g), low, high) for g, low, high in slabs]
     for _ in range(rounds):
         y_lo, y_hi = np.maximum(lo, -BIG_MM), np.minimum(hi, BIG_MM)
-        narrowed = [(_shared_narrowed if g.ndim == 2 else _own_narrowed)(g, low, high, y_lo, y_hi)
-                    for g, low, high in slabs]
+        narrowed = [_narrowed(g, low, high, y_lo, y_hi) for g, low, high in slabs]
         lo = np.maximum(lo, across(np.maximum, np.stack([a for a, _ in narrowed], axis=1)))
         hi = np.minimum(hi, across(np.minimum, np.stack([b for _, b in narrowed], axis=1)))
     return lo, hi
 
 
-def _own_narrowed(g, low, high, y_lo, y_hi):
-    """One round of :func:`propagated` over slabs each box has its own of (g (K, S, 3)): each axis's interval
-    (lo, hi) (K, 3) that the slabs leave it."""
-    p, q = g * y_lo[:, None], g * y_hi[:, None]
-    t_lo, t_hi = np.minimum(p, q), np.maximum(p, q)  # (K, S, 3)
-    # g_k y_k in [low - rest_hi, high - rest_lo], divided by g_k (its ends swapped when g_k < 0); an axis a slab
-    # does not hold is left as it is.
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = (low[..., None] - np.sum(t_hi, axis=2, keepdims=True) + t_hi) / g
-        b = (high[..., None] - np.sum(t_lo, axis=2, keepdims=True) + t_lo) / g
-    zero = g == 0.0
-    return (across(np.maximum, np.where(zero, -np.inf, np.minimum(a, b))),
-            across(np.minimum, np.where(zero, np.inf, np.maximum(a, b))))
-
-
-def _shared_narrowed(g, low, high, y_lo, y_hi):
-    """:func:`_own_narrowed` where every box shares the slabs' g (S, 3): the box's range of each g.y is two
-    products, and each axis's slabs are split by their g's sign on it, known once for all boxes (the {C-R-C}x6
-    design's searches a quarter faster)."""
+def _narrowed(g, low, high, y_lo, y_hi):
+    """One round of :func:`propagated` over one list's slabs: each axis's interval (lo, hi) (K, 3) that they leave
+    it. g.y's range over the box is ``[bottom, top]``; axis k's own part of it taken out, ``g_k y_k`` lies in
+    ``[low - (top - own), high - (bottom - own)]``, divided by g_k (its ends swapped where g_k < 0; an axis a slab
+    does not hold is left as it is)."""
     gp, gn = np.maximum(g, 0.0), np.minimum(g, 0.0)
-    top, bottom = y_hi @ gp.T + y_lo @ gn.T, y_lo @ gp.T + y_hi @ gn.T  # (K, S): g.y's range over the box
+    if g.ndim == 2:
+        top, bottom = y_hi @ gp.T + y_lo @ gn.T, y_lo @ gp.T + y_hi @ gn.T  # (K, S)
+    else:
+        top = np.einsum("ki,ksi->ks", y_hi, gp) + np.einsum("ki,ksi->ks", y_lo, gn)
+        bottom = np.einsum("ki,ksi->ks", y_lo, gp) + np.einsum("ki,ksi->ks", y_hi, gn)
     lo, hi = np.empty_like(y_lo), np.empty_like(y_hi)
     for k in range(3):
-        pos, neg = g[:, k] > 0.0, g[:, k] < 0.0
-        # g_k y_k in [low - (top - its own part), high - (bottom - its own)], divided by g_k.
+        gk = g[..., k]
         with np.errstate(divide="ignore", invalid="ignore"):
-            a = (low - top + gp[:, k] * y_hi[:, k, None] + gn[:, k] * y_lo[:, k, None]) / g[:, k]
-            b = (high - bottom + gp[:, k] * y_lo[:, k, None] + gn[:, k] * y_hi[:, k, None]) / g[:, k]
-        lo[:, k] = np.max(np.concatenate([a[:, pos], b[:, neg]], axis=1), axis=1, initial=-np.inf)
-        hi[:, k] = np.min(np.concatenate([b[:, pos], a[:, neg]], axis=1), axis=1, initial=np.inf)
+            a = (low - top + gp[..., k] * y_hi[:, k, None] + gn[..., k] * y_lo[:, k, None]) / gk
+            b = (high - bottom + gp[..., k] * y_lo[:, k, None] + gn[..., k] * y_hi[:, k, None]) / gk
+        lo[:, k] = np.max(np.where(gk > 0.0, a, np.where(gk < 0.0, b, -np.inf)), axis=1, initial=-np.inf)
+        hi[:, k] = np.min(np.where(gk > 0.0, b, np.where(gk < 0.0, a, np.inf)), axis=1, initial=np.inf)
     return lo, hi
 
 
