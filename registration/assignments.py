@@ -206,17 +206,20 @@ class Tables:
             # A set: the touches on the line, then those on each plane that three or more lie on.
             tied = [on] + [(rows == e) & ((rows == e).sum(axis=1) >= 3)[:, None] for e in planes]
             sets, inverse = np.unique(np.concatenate(tied, axis=1)[big], axis=0, return_inverse=True)
-            size = sets[:, :n].sum(axis=1)
-            fits = np.ones(len(sets), bool)
-            # The smallest first: a set holding one that fits no axis fits none.
-            for m in np.unique(size):
-                misfits = sets[~fits].astype(int)
-                holds = (sets.astype(int) @ misfits.T == misfits.sum(axis=1)).any(axis=1)
-                fits &= ~holds
-                now = np.flatnonzero((size == m) & fits)
-                if len(now):
-                    fits[now] = fit_an_axis([self.places[sets[g, :n]] for g in now], self.offsets[s],
-                                            self.reach[s], self.bands(s, planes, sets[now, n:]))
+            counts = sets.astype(int)
+            holds = counts @ counts.T == counts.sum(axis=1)  # holds[a, b]: set a holds set b
+            np.fill_diagonal(holds, False)
+            fits, tested = np.ones(len(sets), bool), np.zeros(len(sets), bool)
+            # A set holding one that fits no axis fits none: each set searched once those it holds are.
+            while True:
+                fits &= ~(holds & ~fits).any(axis=1)
+                tested |= ~fits
+                now = np.flatnonzero(~tested & ~(holds & ~tested).any(axis=1))
+                if not len(now):
+                    break
+                fits[now] = fit_an_axis([self.places[sets[g, :n]] for g in now], self.offsets[s], self.reach[s],
+                                        self.bands(s, planes, sets[now, n:]))
+                tested[now] = True
             keep[np.flatnonzero(big)[~fits[inverse.ravel()]]] = False
         return rows[keep]
 
@@ -250,14 +253,13 @@ def fit_an_axis(sets, radius, reach, bands=None):
     (the angle of lines obeys the triangle inequality). A cell that fails is dropped, the others split in four
     (the first cells are tested by the cones and bands alone)."""
     sizes = np.array([len(p) for p in sets])
-    M = sizes.max()
-    points = np.zeros((len(sets), M, 3))
-    mask = np.arange(M) < sizes[:, None]
-    for g, p in enumerate(sets):
-        points[g, :len(p)] = p - p.mean(axis=0)
+    flat = np.concatenate(sets)
+    mask = np.arange(sizes.max()) < sizes[:, None]
+    points = np.zeros(mask.shape + (3,))
+    points[mask] = flat - np.repeat(np.add.reduceat(flat, np.cumsum(sizes) - sizes) / sizes[:, None], sizes, axis=0)
     far = np.where(mask, np.linalg.norm(points, axis=2), 0.0)  # |p - m|
     # Each set's narrowest cones about its pairs' lines (the quads' test): the axis lies within each.
-    i, j = np.triu_indices(M, 1)
+    i, j = np.triu_indices(mask.shape[1], 1)
     cone, lines = pair_cones(np.where((mask[:, i] & mask[:, j])[..., None], points[:, j] - points[:, i], 0.0),
                              radius, reach)
     narrow = np.argsort(cone, axis=1)[:, :AXIS_PAIRS]
@@ -265,40 +267,52 @@ def fit_an_axis(sets, radius, reach, bands=None):
     lines = np.take_along_axis(lines, narrow[..., None], axis=1)
     normal, width, angle = (np.zeros((len(sets), 0, 3)), np.zeros((len(sets), 0)), np.zeros((len(sets), 0))) \
         if bands is None else bands
-    # The first cells: (set, face, u, v), half-width h.
+    # The first cells, the same directions for every set: one product tests them all by the cones and bands
+    # alone (beta 0.35 rad: the parallelograms rule out 0.3 % of them on the inclined plane).
     side = (2 * np.arange(AXIS_CELLS) + 1) / AXIS_CELLS - 1.0
     face, u, v = (x.ravel() for x in np.meshgrid(np.arange(3), side, side, indexing="ij"))
-    g = np.repeat(np.arange(len(sets)), len(face))
-    face, u, v = np.tile(face, len(sets)), np.tile(u, len(sets)), np.tile(v, len(sets))
     h = 1.0 / AXIS_CELLS
+    beta = np.sqrt(2.0) * h
+    first = _directions(face, u, v).T
+    keep = np.all(np.abs(lines @ first) >= _least(cone, beta)[..., None], axis=1)
+    if width.shape[1]:
+        keep &= np.all(np.abs(line_angle(normal[..., None, :], first.T) - angle[..., None])
+                       <= (width + beta + SLACK)[..., None], axis=1)
+    g, cell = np.nonzero(keep)
+    face, u, v = face[cell], u[cell], v[cell]
     fits = np.zeros(len(sets), bool)
-    for level in range(AXIS_LEVELS + 1):
-        corner = np.stack([np.ones_like(u), u, v], axis=1)
-        a0 = np.take_along_axis(corner, (np.arange(3)[None] - face[:, None]) % 3, axis=1)  # face k: a0_k = 1
-        a0 /= np.linalg.norm(a0, axis=1, keepdims=True)
-        beta = np.sqrt(2.0) * h
-        wide = cone + beta + SLACK
-        least = np.where(wide < np.pi / 2.0, np.cos(np.minimum(wide, np.pi / 2.0)), 0.0)  # |a0.line| in each cone
-        keep = np.all(np.abs(lines[g] @ a0[:, :, None])[..., 0] >= least[g], axis=1)
-        if width.shape[1]:
-            off = line_angle(normal[g], a0[:, None])
-            keep &= np.all(np.abs(off - angle[g]) <= width[g] + beta + SLACK, axis=1)
-        g, face, u, v, a0 = g[keep], face[keep], u[keep], v[keep], a0[keep]
-        if level:  # the first cells (beta 0.35 rad): the parallelograms rule out 0.3 % of them on the inclined plane
-            keep = _axis_cells(points[g], mask[g], far[g], a0, beta, radius, reach)
-            g, face, u, v = g[keep], face[keep], u[keep], v[keep]
-        counts = np.bincount(g, minlength=len(sets))
-        done = counts > AXIS_KEPT
-        fits |= done
-        alive = ~done[g]
-        g, face, u, v = g[alive], face[alive], u[alive], v[alive]
+    for _ in range(AXIS_LEVELS):
+        fits |= np.bincount(g, minlength=len(sets)) > AXIS_KEPT
+        g, face, u, v = (x[~fits[g]] for x in (g, face, u, v))
         if not len(g):
             return fits
         h /= 2.0
+        beta = np.sqrt(2.0) * h
         du, dv = np.array([-h, h, -h, h]), np.array([-h, -h, h, h])
         g, face = np.repeat(g, 4), np.repeat(face, 4)
         u, v = (np.repeat(u, 4) + np.tile(du, len(u))), (np.repeat(v, 4) + np.tile(dv, len(v)))
+        a0 = _directions(face, u, v)
+        keep = np.all(np.abs(lines[g] @ a0[:, :, None])[..., 0] >= _least(cone, beta)[g], axis=1)
+        if width.shape[1]:
+            keep &= np.all(np.abs(line_angle(normal[g], a0[:, None]) - angle[g]) <= width[g] + beta + SLACK, axis=1)
+        g, face, u, v, a0 = g[keep], face[keep], u[keep], v[keep], a0[keep]
+        keep = _axis_cells(points[g], mask[g], far[g], a0, beta, radius, reach)
+        g, face, u, v = g[keep], face[keep], u[keep], v[keep]
     return fits | (np.bincount(g, minlength=len(sets)) > 0)
+
+
+def _directions(face, u, v):
+    """The unit directions (K, 3) through (u, v) on the cube's faces ``face`` (0, 1, 2: x, y or z is 1)."""
+    corner = np.stack([np.ones_like(u), u, v], axis=1)
+    a0 = np.take_along_axis(corner, (np.arange(3)[None] - face[:, None]) % 3, axis=1)
+    return a0 / np.linalg.norm(a0, axis=1, keepdims=True)
+
+
+def _least(cone, beta):
+    """The least ``|a0.line|`` (...) of a direction a0 within ``beta`` (rad) of a cone of width ``cone`` about a
+    line (0 where they span a right angle)."""
+    wide = cone + beta + SLACK
+    return np.where(wide < np.pi / 2.0, np.cos(np.minimum(wide, np.pi / 2.0)), 0.0)
 
 
 def _axis_cells(points, mask, far, a0, beta, radius, reach):
