@@ -35,7 +35,7 @@ import numpy as np
 
 from .elements import perpendicular_basis
 from .patches import patch_box
-from .search import contact_offset, deviation_bound, normal_cones, patch_growth
+from .search import contact_offset, deviation_bound, normal_cones, pair_cones, patch_growth
 
 MAX_ROWS = 20_000  # assignments of the touches so far kept at most: past that the poses tell them (:mod:`.face_search`)
 AXIS_TOUCHES = 5  # a cylinder's or line's touches, this many or more, searched for an axis they fit
@@ -261,7 +261,7 @@ def fit_an_axis(sets, radius, reach, bands=None):
     # Each set's narrowest cones about its pairs' lines (the quads' test): the axis lies within each.
     i, j = np.triu_indices(mask.shape[1], 1)
     cone, lines = pair_cones(np.where((mask[:, i] & mask[:, j])[..., None], points[:, j] - points[:, i], 0.0),
-                             radius, reach)
+                             _span(radius, reach))
     narrow = np.argsort(cone, axis=1)[:, :AXIS_PAIRS]
     cone = np.take_along_axis(cone, narrow, axis=1)
     lines = np.take_along_axis(lines, narrow[..., None], axis=1)
@@ -421,26 +421,22 @@ def _sphere(P, radius, reach):
 def _line(P, radius, reach):
     """Quads whose pairs' cones about the axis (module doc) meet two by two."""
     i, j = np.array(list(itertools.combinations(range(4), 2))).T
-    cone, unit = pair_cones(P[:, j] - P[:, i], radius, reach)  # (Q, 6)
+    cone, unit = pair_cones(P[:, j] - P[:, i], _span(radius, reach))  # (Q, 6)
     fits = np.ones(len(P), bool)
     for a, b in itertools.combinations(range(6), 2):
         fits &= line_angle(unit[:, a], unit[:, b]) <= cone[:, a] + cone[:, b] + SLACK
     return fits
 
 
+def _span(radius, reach):
+    """The most two touches within ``reach`` of a cylinder of ``radius`` (mm; 0: a line) lie apart across its
+    axis: its diameter, rounding kept on the tests' side."""
+    return 2.0 * (radius + reach) * (1.0 + SLACK)
+
+
 def line_angle(u, v):
     """The angle (rad, 0 to pi/2) between the lines along unit vectors u and v (..., 3, broadcast)."""
     return np.arccos(np.clip(np.abs(np.sum(u * v, axis=-1)), 0.0, 1.0))
-
-
-def pair_cones(d, radius, reach):
-    """Each pair's cone about the axis of a cylinder (or line) of ``radius`` both touches lie within ``reach``
-    of, from their difference d (..., 3): the axis lies within ``arcsin(2 (R + r) / |d|)`` of d's line (rad; pi/2
-    where they lie no farther apart than its diameter, or d is 0), and that line's unit vector (0 for d 0)."""
-    length = np.linalg.norm(d, axis=-1)
-    some = np.where(length > 0.0, length, 1.0)
-    ratio = np.clip(2.0 * (radius + reach) * (1.0 + SLACK) / some, 0.0, 1.0)
-    return np.where(length > 0.0, np.arcsin(ratio), np.pi / 2.0), d / some[..., None]
 
 
 QUAD_TESTS = {"plane": _plane, "point": _sphere, "line": _line}

@@ -331,14 +331,25 @@ def tube_pairs(planes, lines):
     """Every pair of touches on one plane and on one line or cylinder, as :func:`tube_turns` takes them, from each
     plane's (fixture normal, touches (n, 3), reach (n,) mm) and each line's (fixture axis, touches (n, 3), how far
     each may lie from the axis (n,) mm): on a plane ``|(R f).d| <= r_i + r_j`` (each touch within its reach of
-    it); on a line ``|(R a).d| >= sqrt(|d|^2 - (s_i + s_j)^2)`` (d's part across the axis is at most s_i + s_j)."""
+    it); on a line ``|(R a).d| >= |d| cos(c)``, c its pair's cone (:func:`pair_cones`, span ``s_i + s_j``)."""
     pairs = [(f, points[j] - points[i], reach[i] + reach[j], 0.0) for f, points, reach, *_ in planes
              for i, j in itertools.combinations(range(len(points)), 2)]
     for a, points, across_mm in lines:
-        for i, j in itertools.combinations(range(len(points)), 2):
-            d = points[j] - points[i]
-            pairs.append((a, d, np.inf, np.sqrt(max(d @ d - (across_mm[i] + across_mm[j]) ** 2, 0.0))))
+        i, j = np.triu_indices(len(points), 1)
+        d = points[j] - points[i]
+        cone, _ = pair_cones(d, across_mm[i] + across_mm[j])
+        pairs += [(a, dk, np.inf, least) for dk, least in zip(d, np.linalg.norm(d, axis=1) * np.cos(cone))]
     return tuple(zip(*pairs)) if pairs else ((), (), (), ())
+
+
+def pair_cones(d, span):
+    """Each pair's cone about the axis of a line both touches lie within ``span`` of together (mm, the sum of
+    their distances from it), from their difference d (..., 3): d's part across the axis is at most span, so the
+    axis lies within ``arcsin(span / |d|)`` of d's line (rad; pi/2 where they lie no farther apart than span, or d
+    is 0); and that line's unit vector (0 for d 0)."""
+    length = np.linalg.norm(d, axis=-1)
+    some = np.where(length > 0.0, length, 1.0)
+    return np.where(length > 0.0, np.arcsin(np.clip(span / some, 0.0, 1.0)), np.pi / 2.0), d / some[..., None]
 
 
 def first_turns(centres, normals, pairs=((), (), (), ()), most=FIRST_TURN_PLANES):
