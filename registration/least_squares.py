@@ -9,7 +9,7 @@ import numpy as np
 from .pose import apply_twist, rotation_from_vector
 
 MAX_ITERATIONS = 60
-STEP_TOLERANCE = 1e-4  # LM stops once a step moves the touches less than this many sigma
+STEP_TOLERANCE = 1e-4  # LM stops, the step not taken, once one would move the touches less than this many sigma
 STALLED_AFTER = 4  # LM iterations before a refinement may be abandoned as stalled ...
 STALLED_COST_FACTOR = 1e4  # ... while its cost exceeds this many times sigma^2 per row ...
 STALLED_DECREASE = 0.5  # ... and one iteration removes less than half of it
@@ -37,6 +37,8 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
         improved = False
         for _ in range(12):
             step = -np.linalg.solve(A + lam * np.diag(diag), g)
+            if _moves(step, length) < STEP_TOLERANCE * problem.sigma:
+                return rotation, translation, r, J  # a step this small changes nothing the test sees: not taken
             R2, t2 = apply_twist(rotation, translation, step)
             r2, J2 = problem.evaluate(R2, t2)
             cost2 = float(np.sum(w * r2 * r2))
@@ -46,15 +48,19 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
             lam *= 8.0
         if not improved:
             break
-        small = np.linalg.norm(step[:3]) * length + np.linalg.norm(step[3:]) < STEP_TOLERANCE * problem.sigma
         # A decrease this small is nothing to the residual test: in a flat valley LM would creep on for long.
         tiny = cost - cost2 <= 1e-16 * max(cost, 1e-30) + FLAT_DECREASE * problem.sigma**2
         stalled = may_give_up and iteration >= STALLED_AFTER and cost2 > hopeless and cost2 > STALLED_DECREASE * cost
         rotation, translation, r, J, cost = R2, t2, r2, J2, cost2
         lam = max(lam / 10.0, 1e-9)
-        if small or tiny or stalled:
+        if tiny or stalled:
             break
     return rotation, translation, r, J
+
+
+def _moves(step, length):
+    """How far a twist step (..., 6) moves the touches at most, mm: its turn over the part's ``length``, its shift."""
+    return np.linalg.norm(step[..., :3], axis=-1) * length + np.linalg.norm(step[..., 3:], axis=-1)
 
 
 def levenberg_marquardt_batch(problem, rotations, translations, without=None, max_iterations=MAX_ITERATIONS):
@@ -90,20 +96,23 @@ def levenberg_marquardt_batch(problem, rotations, translations, without=None, ma
             k = np.flatnonzero(trying)
             idx = active[k]
             step = -np.linalg.solve(A[k] + lam[idx, None, None] * (diag[k, :, None] * np.eye(6)), g[k, :, None])[..., 0]
+            small = _moves(step, length) < STEP_TOLERANCE * problem.sigma
+            stop[k[small]], trying[k[small]] = True, False
+            k, idx, step = k[~small], idx[~small], step[~small]
+            if not len(k):
+                break
             R2 = Rs[idx] @ rotation_from_vector(step[:, :3])
             t2 = ts[idx] + np.einsum("kij,kj->ki", Rs[idx], step[:, 3:])
             r2, J2 = evaluate(idx, R2, t2)
             cost2 = np.sum(r2 * r2, axis=1)
             ok = cost2 <= cost[idx]
             moved, before, after = idx[ok], cost[idx[ok]], cost2[ok]
-            small = (np.linalg.norm(step[ok, :3], axis=1) * length + np.linalg.norm(step[ok, 3:], axis=1)
-                     < STEP_TOLERANCE * problem.sigma)
             tiny = before - after <= 1e-16 * np.maximum(before, 1e-30) + FLAT_DECREASE * problem.sigma**2
             stalled = (iteration >= STALLED_AFTER) & (after > hopeless[moved]) & (after > STALLED_DECREASE * before)
             Rs[moved], ts[moved], r[moved], J[moved], cost[moved] = R2[ok], t2[ok], r2[ok], J2[ok], after
             lam[moved] = np.maximum(lam[moved] / 10.0, 1e-9)
             lam[idx[~ok]] *= 8.0
-            stop[k[ok]] = small | tiny | stalled
+            stop[k[ok]] = tiny | stalled
             trying[k[ok]] = False
             if not trying.any():
                 break
