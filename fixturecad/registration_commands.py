@@ -74,8 +74,7 @@ def register(
     """Pose of the fixture's datum frame (fixture2meas) from touches, on the folder's features.json (the
     copy in its register.py is for register.py run alone).
 
-    Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 6 a search that did not complete
-    (nothing proven), 2 bad input.
+    Exit code: 0 unique, 3 ambiguous, 4 underdetermined, 5 inconsistent, 6 search incomplete, 2 bad input.
     """
     from fixturecad.registration.deviations import tolerance_from_document
     from fixturecad.registration.engine import register_touches
