@@ -18,9 +18,8 @@ from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, normal_cones, propagated, rotation_boxes, row_span, search,
-                                            shell_box,
-                                            normal_signs, stand_in_tree, threshold_mm2, tube_pairs)
+                                            measured_normal, normal_cones, normal_signs, propagated, rotation_boxes,
+                                            row_span, search, shell_box, stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
