@@ -467,8 +467,7 @@ class Tree:
         spans = [row_span(self.core[i] == "plane", self.direction[i]) for i in flat]
         self.row_touch = np.repeat(flat, [len(m) for m in spans]).astype(int)
         self.row_unit = np.concatenate(spans) if spans else np.zeros((0, 3))
-        self.H_flat = self.row_unit.T @ self.row_unit
-        self.H_flat_least, self.H_flat_pinv = least_and_pinv(self.H_flat)
+        self.H_flat_least, self.H_flat_pinv = least_and_pinv(self.row_unit.T @ self.row_unit)
         self.flat_swing = largest_swing(b[self.flat])
         self.flat_dev = float(np.linalg.norm(self.dev[self.flat]))
         # Flat touches on one feature, two or more: their rows' least over y is the same wherever y is, so its
@@ -735,14 +734,15 @@ class Tree:
         cells' rotations R (K, 3, 3)) moves with the modes' coordinates u (``z = L u``): (K, R, k'). A mode moves
         its feature's surface by ``omega x p + v`` (a row by minus that along it), a radius mode along the outward
         direction (a stand-in's element by its ``radius_move``, or its sensor's turned by R)."""
-        twists = self.mode_twists[touch]  # (R, k, 6)
-        # u . (omega x p + v) = (p x u) . omega + u . v
-        change = -(np.einsum("kri,rmi->krm", cross(x[:, touch], unit), twists[..., :3])
-                   + np.einsum("kri,rmi->krm", unit, twists[..., 3:]))
+        # The modes' twists taken to u's coordinates (R, 6, k'), a radius mode's apart (it moves a row along it).
+        twists = np.einsum("rmi,ml->ril", np.where(self.mode_radius[touch][..., None], 0.0, self.mode_twists[touch]),
+                           self.L)
+        # u . (omega x p + v) = (p x u) . omega + u . v, a row by minus that: a product per touch over the cells.
+        arm = np.concatenate([cross(x[:, touch], unit), unit], axis=2).transpose(1, 0, 2)  # (R, K, 6)
+        change = -(arm @ twists).transpose(1, 0, 2)
         move = self.radius_move[touch][None] + np.einsum("kji,rj->kri", R, self.radius_sensor[touch])
         radius = np.where(self.radius_own[touch][None], -1.0, -np.einsum("kri,kri->kr", unit, move))
-        change = np.where(self.mode_radius[touch][None], radius[..., None], change)
-        return change @ self.L
+        return change + radius[..., None] * (self.mode_radius[touch] @ self.L)[None]
 
     # --- the bounds ----------------------------------------------------------------------------------------
 
@@ -835,7 +835,7 @@ class Tree:
         # axes (the remainders hold over the box it had).
         c.W, c.theta, c.slack, c.held = W, theta, slack, held = self.ellipsoid(c)
         centre = theta[:, 3:6] @ self.Q
-        half = np.sqrt(slack[:, None] * np.einsum("ik,nij,jk->nk", self.Q, W[:, 3:6, 3:6], self.Q))
+        half = np.sqrt(slack[:, None] * np.sum(self.Q * (W[:, 3:6, 3:6] @ self.Q), axis=1))
         c.ylo = np.where(held[:, None], np.maximum(c.ylo, centre - half), c.ylo)
         c.yhi = np.where(held[:, None], np.minimum(c.yhi, centre + half), c.yhi)
         c.bound = np.where(np.any(c.ylo > c.yhi, axis=1), np.inf, c.bound)
@@ -942,6 +942,9 @@ class Tree:
             value = np.concatenate([value, c.s_value], axis=1)
             remainder2 = remainder2 + np.sum(c.s_rem**2, axis=1)
             c.modelled = c.modelled & c.s_fine
+        # The rows' columns (value, then omega's and y's) and their products: all the bound and the ellipsoid need.
+        columns = np.concatenate([value[..., None], Jw, unit], axis=2)
+        gram = columns.transpose(0, 2, 1) @ columns
         if self.L is not None:
             # The part's deviations z = L u as unknowns beside y, each u held by sigma u (the test is min over z
             # of |r - J_d z|^2 + sigma^2 z^T S^-1 z): the rows' change with u taken at the y box's
@@ -967,21 +970,17 @@ class Tree:
                 change = np.einsum("ksi,sci->ksc", c.s_twist, self.sensor_twists[rows]) \
                     + c.s_radius[..., None] * self.sensor_radius[rows][None]
                 Jz = np.concatenate([Jz, change @ self.L], axis=1)
-            # u eliminated exactly: min over u of |v - Jz u|^2 + sigma^2 |u|^2 = |F v|^2 (:func:`_modes_eliminated`),
-            # the model's least and its ellipsoid's shadow on (omega, y) as with u among the unknowns.
-            rows = _modes_eliminated(Jz, self.problem.sigma, np.concatenate([value[..., None], Jw, unit], axis=2))
-            value, Jw, unit = rows[..., 0], rows[..., 1:4], rows[..., 4:]
+            # u eliminated exactly: min over u of |v - Jz u|^2 + sigma^2 |u|^2 (:func:`_modes_eliminated`), the
+            # model's least and its ellipsoid's shadow on (omega, y) as with u among the unknowns.
+            gram = gram - _modes_eliminated(Jz, self.problem.sigma, columns)
         c.remainder = np.sqrt(remainder2)
-        flat = self.L is None and self.sensors is None and not self.round.any()
-        c.H = np.broadcast_to(self.H_flat, (K, 3, 3)) if flat else np.einsum("kri,krj->kij", unit, unit)
-        h, E = np.linalg.eigh(c.H)
-        c.H_least = np.maximum(h[:, 0], 0.0)
-        c.H_pinv = np.einsum("kij,kj,klj->kil", E, np.where(h > 1e-9 * h[:, -1:], 1.0 / np.maximum(h, 1e-300), 0.0), E)
-        c.A, c.b, c.Q0, c.Gwy, c.gy = _reduced(Jw, unit, value, c.H_pinv)
-        c.alpha, V = np.linalg.eigh(c.A)
+        c.gram = gram
+        h, E = np.linalg.eigh(gram[:, 4:, 4:])
+        c.H_pinv = (E * np.where(h > 1e-9 * h[:, -1:], 1.0 / np.maximum(h, 1e-300), 0.0)[:, None]) @ E.transpose(0, 2, 1)
+        A, c.b, c.Q0 = _reduced(gram, c.H_pinv)
+        c.alpha, c.V = np.linalg.eigh(A)
         c.alpha = np.maximum(c.alpha, 0.0)
-        c.V = V
-        beta2 = np.einsum("kij,ki->kj", V, c.b) ** 2
+        beta2 = np.einsum("kij,ki->kj", c.V, c.b) ** 2
         # Newton on the secular equation 1/|p(lambda)| = 1/delta from lambda = 0 (monotone from below).
         lam = np.zeros(K)
         for _ in range(8):
@@ -1193,9 +1192,7 @@ class Tree:
         """The first-order model's 6-D ellipsoid of (omega, y) that may pass, ``Q(theta) <= (sqrt(T) +
         remainder + deviations)^2``: its inverse matrix W (K, 6, 6), centre theta* (K, 6), the room left
         above the model's least value (K,, mm^2), and whether the model holds every motion (K,)."""
-        Gww = c.A + c.Gwy @ c.H_pinv @ c.Gwy.transpose(0, 2, 1)
-        G = np.block([[Gww, c.Gwy], [c.Gwy.transpose(0, 2, 1), c.H]])
-        g = np.concatenate([c.b + np.einsum("kij,kjl,kl->ki", c.Gwy, c.H_pinv, c.gy), c.gy], axis=1)
+        G, g = c.gram[:, 1:, 1:], c.gram[:, 1:, 0]
         eig = np.linalg.eigvalsh(G)
         held = eig[:, 0] > 1e-9 * np.maximum(eig[:, -1], 1e-300)
         W = np.linalg.inv(np.where(held[:, None, None], G, np.eye(G.shape[1])))
@@ -1223,7 +1220,7 @@ class Tree:
         # Touch i at a_i + a_i x omega + y + e_i, |e_i| <= kappa_i: over the ellipsoid, within
         # sqrt(slack lambda_max(B_i W B_i^T)) + kappa_i of its image at theta*, B_i = [a_i x, I].
         B = np.concatenate([skew(a), np.broadcast_to(np.eye(3), a.shape + (3,))], axis=3)  # (K, n, 3, 6)
-        spread = np.sqrt(slack[:, None] * np.linalg.eigvalsh(np.einsum("knij,kjl,knml->knim", B, W[:, :6, :6], B))[..., -1])
+        spread = np.sqrt(slack[:, None] * np.linalg.eigvalsh(B @ W[:, None, :6, :6] @ B.transpose(0, 1, 3, 2))[..., -1])
         image = a + cross(a, theta[:, None, :3]) + theta[:, None, 3:6]
         # Where the model leaves a motion free: the cell, every turn within delta and every y in its box.
         whole = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1)[:, None] + c.delta[:, None] * self.marker_rho[None]
@@ -1487,28 +1484,27 @@ def split(v, w, ylo, yhi, turning, relevant):
     return [np.concatenate(p) for p in zip(*parts)]
 
 
-def _modes_eliminated(Jz, sigma, rows):
-    """Rows (K, r, c) times F (K, r, r), ``F^T F = (I + Jz Jz^T / sigma^2)^-1``: a vector v of rows costs ``|F
-    v|^2 = min over u of |v - Jz u|^2 + sigma^2 |u|^2`` (Jz (K, r, k)). With ``C = sigma^2 I + Jz Jz^T = L L^T``
-    (positive definite, its least eigenvalue sigma^2), ``F = sigma L^-1``."""
-    C = np.einsum("kri,ksi->krs", Jz, Jz) + sigma**2 * np.eye(Jz.shape[1])
-    return sigma * np.linalg.solve(np.linalg.cholesky(C), rows)
+def _modes_eliminated(Jz, sigma, columns):
+    """What eliminating the modes u takes off the Gram matrix of the rows' ``columns`` (K, r, c): ``B^T C^-1 B``
+    (K, c, c), ``B = Jz^T columns``, ``C = sigma^2 I + Jz^T Jz`` (Jz (K, r, k)), so that a combination v of the
+    columns costs ``|v|^2 - v^T Jz C^-1 Jz^T v = min over u of |v - Jz u|^2 + sigma^2 |u|^2``. A k by k system:
+    a part's few modes, not the many rows (C positive definite, its least eigenvalue sigma^2)."""
+    Jt = Jz.transpose(0, 2, 1)
+    B = Jt @ columns
+    return B.transpose(0, 2, 1) @ np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(Jz.shape[2]), B)
 
 
-def _reduced(Jw, m, value, H_pinv):
+def _reduced(gram, H_pinv):
     """The least cost over y of linear rows ``value + Jw . omega + m . y``: ``Q0 + 2 b.omega + omega^T A omega``,
-    as (A (K, 3, 3), b (K, 3), Q0 (K,)), with ``Gwy = sum Jw m^T`` and ``gy = sum value m``. ``H_pinv``: the
-    pseudo-inverse of the rows' y block ``sum m m^T`` (the y columns' products lie in its range, so it
+    as (A (K, 3, 3), b (K, 3), Q0 (K,)), from the rows' Gram matrix (K, 7, 7) of their columns (value, Jw, m).
+    ``H_pinv``: the pseudo-inverse of its y block ``sum m m^T`` (the y columns' products lie in its range, so it
     eliminates y exactly)."""
-    Gww = np.einsum("kri,krj->kij", Jw, Jw)
-    Gwy = np.einsum("kri,krj->kij", Jw, m)
-    gw = np.einsum("kri,kr->ki", Jw, value)
-    gy = np.einsum("kri,kr->ki", m, value)
+    Gww, Gwy, gw, gy = gram[:, 1:4, 1:4], gram[:, 1:4, 4:], gram[:, 1:4, 0], gram[:, 4:, 0]
     GH = Gwy @ H_pinv
     A = Gww - GH @ Gwy.transpose(0, 2, 1)
     b = gw - np.einsum("kij,kj->ki", GH, gy)
-    Q0 = np.sum(value**2, axis=1) - np.einsum("ki,kij,kj->k", gy, H_pinv, gy)
-    return A, b, Q0, Gwy, gy
+    Q0 = gram[:, 0, 0] - np.sum(gy * (H_pinv @ gy[..., None])[..., 0], axis=1)
+    return A, b, Q0
 
 
 def _joined(v, w, ylo, yhi):
