@@ -14,6 +14,7 @@ from fixturecad.build import features_document
 from fixturecad.registration.deviations import largest_row_variance, tolerance_from_document
 from fixturecad.registration.elements import perpendicular_basis
 from fixturecad.registration.features import Cylinder, Extent, features_from_json
+from fixturecad.registration.least_squares import levenberg_marquardt
 from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
@@ -44,10 +45,13 @@ IDS = [f"{name}{'' if counts is None else ' ' + '-'.join(map(str, counts.values(
        f"{f' ball {ball:g} mm' if ball else ''}" for name, counts, ball in CASES]
 
 
-def _layout(name, counts, rng, ball=0.0):
+def _layout(name, counts, rng, ball=0.0, printed=None):
     """Touches drawn on the template's patches (every touched feature of the default plan, or ``counts``),
-    at a random pose, as ball centres when ``ball`` (mm): (features, touches in the measurement frame, R, t)."""
+    at a random pose, as ball centres when ``ball`` (mm): (features, touches in the measurement frame, R, t).
+    ``printed``: a part's tolerance, the touches drawn on a random part it allows (its modes uniform over their
+    ranges)."""
     features, plan = (BOSSES, []) if name == "bosses" else _plan(name, "default")
+    drawn = features if printed is None else {**features, **printed.random_part(rng)}
     if counts is None:
         counts = {}
         for entry in plan:
@@ -56,20 +60,22 @@ def _layout(name, counts, rng, ball=0.0):
     R, t = random_rotation(rng), rng.uniform(-80, 80, 3)
     touches = {}
     for fid, count in counts.items():
-        points = patch_points(features[fid])
+        points = patch_points(drawn[fid])
         points = points[rng.choice(len(points), count, replace=False)]
-        touches[fid] = (points + ball * features[fid].normal_at(points)) @ R.T + t
+        touches[fid] = (points + ball * drawn[fid].normal_at(points)) @ R.T + t
     return features, touches, R, t
 
 
-def _problem(name, counts, ball, rng, printed=False):
-    features, touches, R, t = _layout(name, counts, rng, ball)
+def _problem(name, counts, ball, rng, printed=False, deviated=False):
+    """A layout's problem (:func:`_layout`), on the printed part (its recorded tolerance) when ``printed``, the
+    touches drawn on a random part that tolerance allows when ``deviated`` too."""
     tolerance = None
     if printed:
         if name == "bosses":
             pytest.skip("hand-made features: no printed part")
         document = features_document(make(name))
         tolerance = tolerance_from_document(features_from_json(document), document)
+    features, touches, R, t = _layout(name, counts, rng, ball, tolerance if deviated else None)
     problem = Problem(build_groups(features, touches, ball), 0.005, tolerance=tolerance)
     return problem, R, t
 
@@ -94,9 +100,10 @@ def test_the_search_distances_are_the_rows(name, counts, ball):
 def test_the_bound_holds_within_a_cell(name, counts, ball, printed):
     """On 300 random cells a case, most near the true pose where the bounds are tight: no pose sampled in a
     cell (a rotation of its box, a y of its box) has a cost, each distance less its deviation bound on a
-    printed part, below the cell's lower bound. The inequality every dropped cell rests on."""
+    printed part, below the cell's lower bound. The inequality every dropped cell rests on. On a printed part
+    the touches lie on a random printed part, so that the test's cost needs the part's modes."""
     rng = np.random.default_rng(5)
-    problem, R, t = _problem(name, counts, ball, rng, printed)
+    problem, R, t = _problem(name, counts, ball, rng, printed, deviated=printed)
     tree = Tree(problem, threshold_mm2(problem))
     v_true = vector_from_rotation(R)
     y_true = R.T @ (tree.centroid - t)
@@ -124,6 +131,20 @@ def test_the_bound_holds_within_a_cell(name, counts, ball, printed):
         assert test >= cells.first[0] * (1 - 1e-9) - 1e-12
         checked += 1
     assert checked >= 40  # cells the patches and the model do not empty at once
+
+
+@pytest.mark.parametrize("name,counts,ball", CASES, ids=IDS)
+def test_a_cell_of_one_pose_has_the_tests_own_least(name, counts, ball):
+    """Touches on a random printed part, the pose that fits them best (the part's modes marginalised): a cell
+    shrunk to it (a nanoradian, a nanometre) has its first-order model's least, the modes and y eliminated by
+    the model's own algebra, at the test's cost there as the problem's whitening gives it, another reader."""
+    rng = np.random.default_rng(11)
+    problem, R, t = _problem(name, counts, ball, rng, printed=True, deviated=True)
+    tree = Tree(problem, threshold_mm2(problem))
+    R, t, r, _ = levenberg_marquardt(problem, R, t)
+    y = (R.T @ (tree.centroid - t)) @ tree.Q
+    cells = tree.cells(vector_from_rotation(R)[None], np.array([1e-9]), (y - 1e-6)[None], (y + 1e-6)[None])
+    assert cells.least[0] == pytest.approx(r @ r, rel=1e-6, abs=1e-9)
 
 
 @pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
