@@ -381,12 +381,9 @@ def residuals_and_jacobian(ctype, sensor: Side, fixture: Side, rotation, transla
         for (label, key), g in grad.items():
             if label != "B":
                 continue
-            g = np.broadcast_to(g, (n, 3))
+            jacobian[:, row, :3] += cross(moved[key], g)
             if key in POINT_KEYS:
-                jacobian[:, row, :3] += cross(np.broadcast_to(moved[key], (n, 3)), g)
                 jacobian[:, row, 3:] += g
-            else:
-                jacobian[:, row, :3] += cross(np.broadcast_to(moved[key], (n, 3)), g)
     return values, jacobian
 
 

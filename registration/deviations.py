@@ -52,6 +52,10 @@ class FixtureTolerance:
             self.slices[fid] = slice(start, start + len(m.names))
             start += len(m.names)
         self.size = start
+        # Every mode's twist (size, 6), feature and whether it grows a radius, in the slices' order.
+        self.twists = np.concatenate([np.zeros((0, 6))] + [m.twists for m in self.modes.values()])
+        self.mode_feature = np.array([fid for fid, m in self.modes.items() for _ in m.names])
+        self.mode_radius = np.concatenate([np.zeros(0, bool)] + [m.radius for m in self.modes.values()])
         self.projection = self._gauge_projection()
         self._given = covariances
         self._covariance(())
@@ -169,23 +173,21 @@ class FixtureTolerance:
         fid = entry["feature"]
         return entry_on(entry, self.modes[fid], deviations[fid])
 
-    def feature_twists(self, fid, rotation, translation):
-        """The mode twists (k, 6) of one feature mapped into the measurement frame at a pose.
+    def twists_at(self, rotation, translation):
+        """Every mode's twist (size, 6) mapped into the measurement frame at a pose.
 
         A fixture-frame twist (w, v) is the measurement-frame twist
         (R w, R v + t x R w).
         """
-        twists = self.modes[fid].twists
-        w = twists[:, :3] @ rotation.T
-        v = twists[:, 3:] @ rotation.T + cross(translation, w)
+        w = self.twists[:, :3] @ rotation.T
+        v = self.twists[:, 3:] @ rotation.T + cross(translation, w)
         return np.hstack([w, v])
 
 
 def deviation_rows(problem, tolerance, rotation, translation, jacobian):
     """J_d (m, K): how the problem's (whitened) rows change with every mode coordinate at a pose
     (:func:`mode_rows`, the modes' twists mapped into the measurement frame)."""
-    return mode_rows(tolerance, problem.row_feature, jacobian,
-                     lambda fid: tolerance.feature_twists(fid, rotation, translation),
+    return mode_rows(tolerance, problem.row_feature, jacobian, tolerance.twists_at(rotation, translation),
                      lambda: problem.radius_derivative(rotation, translation))
 
 
@@ -194,22 +196,16 @@ def mode_rows(tolerance, row_feature, jacobian, twists, radius_rows):
     mode coordinate.
 
     A mode moves one feature rigidly: its rows change as the fixture's rows
-    do under that twist (``twists(fid)``: the feature's mode twists (k, 6) in
-    the Jacobian's frame), the rows of other features not at all. A radius
-    mode grows the feature: ``radius_rows()`` (..., m), how each row changes as
-    its feature's radius grows, asked for only when one is touched.
+    do under that twist (``twists``: every mode's twist (K, 6) in the
+    Jacobian's frame), the rows of other features not at all. A radius mode
+    grows the feature: ``radius_rows()`` (..., m), how each row changes as its
+    feature's radius grows, asked for only when one is touched.
     """
-    Jd = np.zeros(jacobian.shape[:-1] + (tolerance.size,))
-    drho = None
-    for fid, s in tolerance.slices.items():
-        rows = np.flatnonzero(row_feature == fid)
-        if not len(rows):
-            continue
-        m = tolerance.modes[fid]
-        Jd[..., rows, s] = jacobian[..., rows, :] @ twists(fid).T
-        if m.radius.any():
-            drho = radius_rows() if drho is None else drho
-            Jd[..., rows[:, None], s.start + np.flatnonzero(m.radius)] = drho[..., rows, None]
+    own = np.asarray(row_feature)[:, None] == tolerance.mode_feature[None]  # (m, K)
+    Jd = np.where(own, jacobian @ twists.T, 0.0)
+    grown = own[:, tolerance.mode_radius]
+    if grown.any():
+        Jd[..., tolerance.mode_radius] = np.where(grown, radius_rows()[..., None], 0.0)
     return Jd
 
 

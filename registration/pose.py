@@ -19,9 +19,10 @@ ORTHONORMAL_TOLERANCE = 1e-6  # largest |R^T R - I| entry accepted in a given 4x
 def skew(w):
     """The cross-product matrices (..., 3, 3) of ``w`` (..., 3): ``skew(w) @ x == cross(w, x)``."""
     w = np.asarray(w, dtype=np.float64)
-    z = np.zeros(w.shape[:-1])
-    x, y, u = w[..., 0], w[..., 1], w[..., 2]
-    return np.stack([np.stack([z, -u, y], -1), np.stack([u, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+    K = np.zeros(w.shape + (3,))  # filled in place: cheaper than stacking rows of parts
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = w[..., 2], -w[..., 1], w[..., 0]
+    return K
 
 
 def point_covariances(points, twist_covariance):
@@ -38,9 +39,7 @@ def rotation_from_vector(omega):
     omega = np.asarray(omega, dtype=np.float64)
     if omega.ndim == 2:
         angle = np.linalg.norm(omega, axis=1)[:, None, None]
-        K = np.zeros((len(omega), 3, 3))
-        K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -omega[:, 2], omega[:, 1], -omega[:, 0]
-        K = K - K.transpose(0, 2, 1)
+        K = skew(omega)
         small = angle < 1e-8
         a = np.where(small, 1.0, np.sin(angle) / np.where(small, 1.0, angle))
         b = np.where(small, 0.5, (1.0 - np.cos(angle)) / np.where(small, 1.0, angle) ** 2)

@@ -153,7 +153,7 @@ class Problem:
                 for g, rows in zip(self.groups, self._batch_layout[2])], axis=1)
             return drho if without is None else drho * kept
 
-        Jd = mode_rows(self.tolerance, feature, J, lambda fid: self.tolerance.modes[fid].twists, radius_derivative)
+        Jd = mode_rows(self.tolerance, feature, J, self.tolerance.twists, radius_derivative)
         whiten = whitening(self.tolerance, Jd, self.sigma)
         return whiten(r), whiten(J)
 

@@ -1360,14 +1360,12 @@ def _narrowed(g, low, high, y_lo, y_hi):
     else:
         top = np.einsum("ki,ksi->ks", y_hi, gp) + np.einsum("ki,ksi->ks", y_lo, gn)
         bottom = np.einsum("ki,ksi->ks", y_lo, gp) + np.einsum("ki,ksi->ks", y_hi, gn)
-    lo, hi = np.empty_like(y_lo), np.empty_like(y_hi)
-    for k in range(3):
-        gk = g[..., k]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = (low - top + gp[..., k] * y_hi[:, k, None] + gn[..., k] * y_lo[:, k, None]) / gk
-            b = (high - bottom + gp[..., k] * y_lo[:, k, None] + gn[..., k] * y_hi[:, k, None]) / gk
-        lo[:, k] = np.max(np.where(gk > 0.0, a, np.where(gk < 0.0, b, -np.inf)), axis=1, initial=-np.inf)
-        hi[:, k] = np.min(np.where(gk > 0.0, b, np.where(gk < 0.0, a, np.inf)), axis=1, initial=np.inf)
+    # Every axis at once (K, S, 3).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (low[..., None] - top[..., None] + gp * y_hi[:, None] + gn * y_lo[:, None]) / g
+        b = (high[..., None] - bottom[..., None] + gp * y_lo[:, None] + gn * y_hi[:, None]) / g
+    lo = np.max(np.where(g > 0.0, a, np.where(g < 0.0, b, -np.inf)), axis=1, initial=-np.inf)
+    hi = np.min(np.where(g > 0.0, b, np.where(g < 0.0, a, np.inf)), axis=1, initial=np.inf)
     return lo, hi
 
 
