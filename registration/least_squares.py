@@ -37,7 +37,7 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
         improved = False
         for _ in range(12):
             step = -np.linalg.solve(A + lam * np.diag(diag), g)
-            if _moves(step, length) < STEP_TOLERANCE * problem.sigma:
+            if step_moves(step, length) < STEP_TOLERANCE * problem.sigma:
                 return rotation, translation, r, J  # a step this small changes nothing the test sees: not taken
             R2, t2 = apply_twist(rotation, translation, step)
             r2, J2 = problem.evaluate(R2, t2)
@@ -58,7 +58,7 @@ def levenberg_marquardt(problem, rotation, translation, weights=None, max_iterat
     return rotation, translation, r, J
 
 
-def _moves(step, length):
+def step_moves(step, length):
     """How far a twist step (..., 6) moves the touches at most, mm: its turn over the part's ``length``, its shift."""
     return np.linalg.norm(step[..., :3], axis=-1) * length + np.linalg.norm(step[..., 3:], axis=-1)
 
@@ -96,7 +96,7 @@ def levenberg_marquardt_batch(problem, rotations, translations, without=None, ma
             k = np.flatnonzero(trying)
             idx = active[k]
             step = -np.linalg.solve(A[k] + lam[idx, None, None] * (diag[k, :, None] * np.eye(6)), g[k, :, None])[..., 0]
-            small = _moves(step, length) < STEP_TOLERANCE * problem.sigma
+            small = step_moves(step, length) < STEP_TOLERANCE * problem.sigma
             stop[k[small]], trying[k[small]] = True, False
             k, idx, step = k[~small], idx[~small], step[~small]
             if not len(k):

@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .elements import cross, distance_and_outward, perpendicular_basis
-from .least_squares import levenberg_marquardt
+from .least_squares import STEP_TOLERANCE, levenberg_marquardt, step_moves
 from .mobility import matrix_rank
 from .patches import patch_box
 from .pose import point_covariances, rotation_from_vector, skew, vector_from_rotation
@@ -1229,7 +1229,9 @@ class Tree:
         return start_R, start_y, centre, reach
 
     def refined(self, Rs, ts):
-        """Poses refined together by Gauss-Newton on the touches' rows and the bounded sensors': (Rs, ts)."""
+        """Poses refined together by Gauss-Newton on the touches' rows and the bounded sensors': (Rs, ts); it stops
+        after steps that all moved the touches too little for the test to see (the next would move them less)."""
+        length = self.full.scale()
         for _ in range(REFINE_STEPS):
             r, J = self.full.evaluate_batch(Rs, ts)
             A = J.transpose(0, 2, 1) @ J
@@ -1238,6 +1240,8 @@ class Tree:
             # The fixture-frame twist: x -> R (exp(omega) x + v) + t.
             ts = ts + (Rs @ step[:, 3:, None])[..., 0]
             Rs = Rs @ rotation_from_vector(step[:, :3])
+            if np.all(step_moves(step, length) < STEP_TOLERANCE * self.problem.sigma):
+                break
         return Rs, ts
 
 
@@ -1451,9 +1455,11 @@ class Cells:
         self.v, self.w, self.ylo, self.yhi = v, w, ylo, yhi
 
     def take(self, keep):
+        """The cells ``keep`` (a mask or indices) picks."""
+        index = np.flatnonzero(keep) if keep.dtype == bool else keep  # indices take faster than a mask masks
         out = Cells.__new__(Cells)
         for name, value in vars(self).items():
-            setattr(out, name, value[keep])
+            setattr(out, name, value.take(index, axis=0))
         return out
 
     @staticmethod
