@@ -35,7 +35,7 @@ import numpy as np
 
 from .elements import perpendicular_basis
 from .patches import patch_box
-from .search import contact_offset, deviation_bound, normal_cones, pair_cones, patch_growth
+from .search import contact_offset, deviation_bound, normal_cones, pair_cones, pair_indices, patch_growth
 
 MAX_ROWS = 20_000  # assignments of the touches so far kept at most: past that the poses tell them (:mod:`.face_search`)
 AXIS_TOUCHES = 5  # a cylinder's or line's touches, this many or more, searched for an axis they fit
@@ -259,7 +259,7 @@ def fit_an_axis(sets, radius, reach, bands=None):
     points[mask] = flat - np.repeat(np.add.reduceat(flat, np.cumsum(sizes) - sizes) / sizes[:, None], sizes, axis=0)
     far = np.where(mask, np.linalg.norm(points, axis=2), 0.0)  # |p - m|
     # Each set's narrowest cones about its pairs' lines (the quads' test): the axis lies within each.
-    i, j = np.triu_indices(mask.shape[1], 1)
+    i, j = pair_indices(mask.shape[1])
     cone, lines = pair_cones(np.where((mask[:, i] & mask[:, j])[..., None], points[:, j] - points[:, i], 0.0),
                              _span(radius, reach))
     narrow = np.argsort(cone, axis=1)[:, :AXIS_PAIRS]

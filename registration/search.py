@@ -186,13 +186,13 @@ def measured_normal(points, reach):
     if np.isnan(phi[0]):
         return None
     n, phi = n[0], float(phi[0])
-    i, j = np.triu_indices(len(points), 1)
+    i, j = pair_indices(len(points))
     d = (points[j] - points[i]) / (reach[i] + reach[j])[:, None]
     # The slabs' edges a.u = b (both sides of each pair's), their corners where two meet, the corners in every slab.
     along, across = d @ n, d @ np.column_stack(perpendicular_basis(n))
     a = np.concatenate([across, across])
     b = np.concatenate([np.ones(len(d)), -np.ones(len(d))]) / np.cos(phi) - np.concatenate([along, along])
-    k, m = np.triu_indices(len(a), 1)
+    k, m = pair_indices(len(a))
     det = a[k, 0] * a[m, 1] - a[k, 1] * a[m, 0]
     meet = np.abs(det) > 1e-12
     k, m, det = k[meet], m[meet], det[meet]
@@ -211,7 +211,7 @@ def normal_cones(points, reach, mask):
     Summed over the k pairs, ``n^T P n <= k`` with ``P = sum d d^T / (r_i + r_j)^2`` (d = p_j - p_i); with n* the
     eigenvector of P's least eigenvalue, ``n = cos(phi) n* + sin(phi) m`` has ``n^T P n >= sin^2(phi)
     lambda_2``, so ``sin^2(phi) <= k / lambda_2``."""
-    i, j = np.triu_indices(points.shape[1], 1)
+    i, j = pair_indices(points.shape[1])
     both = mask[:, i] & mask[:, j]
     d = np.where(both[..., None], (points[:, j] - points[:, i]) / (reach[:, i] + reach[:, j])[..., None], 0.0)
     lam, vec = np.linalg.eigh(np.einsum("gki,gkj->gij", d, d))
@@ -335,7 +335,7 @@ def tube_pairs(planes, lines):
     pairs = [(f, points[j] - points[i], reach[i] + reach[j], 0.0) for f, points, reach, *_ in planes
              for i, j in itertools.combinations(range(len(points)), 2)]
     for a, points, across_mm in lines:
-        i, j = np.triu_indices(len(points), 1)
+        i, j = pair_indices(len(points))
         d = points[j] - points[i]
         cone, _ = pair_cones(d, across_mm[i] + across_mm[j])
         pairs += [(a, dk, np.inf, least) for dk, least in zip(d, np.linalg.norm(d, axis=1) * np.cos(cone))]
@@ -1290,6 +1290,13 @@ def _read_only(array):
     return array
 
 
+@functools.lru_cache(maxsize=None)
+def pair_indices(n):
+    """Every pair ``i < j`` of n things, ``np.triu_indices(n, 1)``, built once a size (numpy builds an n by n mask
+    each call). Read only."""
+    return tuple(_read_only(index) for index in np.triu_indices(n, 1))
+
+
 @by_value
 def row_span(plane, direction):
     """Unit vectors (k, 3) spanning a flat touch's rows: a plane's normal, the two directions across a line,
@@ -1326,13 +1333,14 @@ def shell_box(points, radius, width):
     p = points - origin
     near, far = np.maximum(radius - width, 0.0) ** 2, (radius + width) ** 2
     lo, hi = np.max(p - (radius + width)[:, None], axis=0), np.min(p + (radius + width)[:, None], axis=0)
-    i, j = np.triu_indices(len(p), 1)
+    i, j = pair_indices(len(p))
     g = 2.0 * (p[i] - p[j])
     constant = np.sum(p[i] ** 2, axis=1) - np.sum(p[j] ** 2, axis=1)
     low, high = constant - (far[i] - near[j]), constant - (near[i] - far[j])  # g.C lies between
-    if np.linalg.matrix_rank(g) == 3:
-        # Any A with A g = I gives C = A (g C): the least-squares one's box.
-        A = np.linalg.pinv(g)
+    u, s, vt = np.linalg.svd(g, full_matrices=False)
+    if np.count_nonzero(s > s.max(initial=0.0) * max(g.shape) * np.finfo(float).eps) == 3:  # numpy's matrix_rank
+        # Any A with A g = I gives C = A (g C): the least-squares one's box (g's pseudo-inverse).
+        A = vt.T @ ((1.0 / s)[:, None] * u.T)
         mid, half = A @ (0.5 * (low + high)), np.abs(A) @ (0.5 * (high - low))
         lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
     lo, hi = propagated([(g, low[None], high[None])], lo[None], hi[None], 2)
