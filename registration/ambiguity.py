@@ -11,7 +11,7 @@ from .patches import patch_points
 from .problem import Problem
 from .solve import solve
 from .touches import point_touches
-from .verdict import Solution, chi_square_passes, judged, same_pose
+from .verdict import Solution, chi_square_passes, judged, same_as_any
 
 SCREEN_STARTS = 4  # candidate poses of the whole set an explanation is looked for from, lowest cost first
 
@@ -37,7 +37,7 @@ def explanations(problem, features, solutions, initial_pose=None, told=()):
     candidates = [(s.rotation, s.translation) for s in solutions[:SCREEN_STARTS]]
     starts = []
     for pose in [_robust_pose(problem, *candidates[0])] + candidates:
-        if not any(same_pose(pose, known) for known in starts):
+        if not same_as_any(pose, starts):
             starts.append(pose)
     touches = list(dict.fromkeys(int(k) for k in problem.row_touch))
     left_out = _left_out_fits(problem, touches, starts)
@@ -83,17 +83,17 @@ def _left_out_fits(problem, touches, starts):
     once: {touch: fits}."""
     left = np.repeat([-1 if k is None else k for k in touches], len(starts))
     Rs, ts = (np.tile(np.array(x), (len(touches),) + (1,) * np.ndim(x[0])) for x in zip(*starts))
-    Rs, ts = levenberg_marquardt_batch(problem, Rs, ts, left)
+    Rs, ts, costs = levenberg_marquardt_batch(problem, Rs, ts, left)
     fits = {}
     for touch, poses in zip(touches, np.split(np.arange(len(left)), len(touches))):
         reduced = problem if touch is None else problem.without(touch)
         length, found = reduced.scale(), []
         for k in poses:
-            r, J = reduced.evaluate(Rs[k], ts[k])
-            if not chi_square_passes(r @ r, len(r), 6, reduced.sigma):
+            if not chi_square_passes(costs[k], reduced.size, 6, reduced.sigma):
                 continue  # (no rank passes it then: judged, it would not be good)
+            r, J = reduced.evaluate(Rs[k], ts[k])
             solution = judged(reduced, Solution(Rs[k], ts[k], r, J), length)
-            if solution.good and not any(same_pose((Rs[k], ts[k]), (s.rotation, s.translation)) for s in found):
+            if solution.good and not same_as_any((Rs[k], ts[k]), [(s.rotation, s.translation) for s in found]):
                 found.append(solution)
         fits[touch] = found
     return fits

@@ -41,7 +41,7 @@ from .touches import build_groups
 from .unlabelled import (assigned, assigned_problem, check_unlabelled, faces_holding, nearest_assignment,
                          solve_unlabelled, surface_features)
 from .uncertainty import covariance, covariance_from_information, sigmas
-from .verdict import Solution, judged, same_pose
+from .verdict import Solution, judged, same_as_any
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
@@ -227,7 +227,7 @@ def _distinct(solutions):
     """The solutions with repeats of one pose left out."""
     out = []
     for s in solutions:
-        if not any(same_pose((s.rotation, s.translation), (o.rotation, o.translation)) for o in out):
+        if not same_as_any((s.rotation, s.translation), [(o.rotation, o.translation) for o in out]):
             out.append(s)
     return out
 

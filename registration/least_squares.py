@@ -65,9 +65,9 @@ def step_moves(step, length):
 
 def levenberg_marquardt_batch(problem, rotations, translations, without=None, max_iterations=MAX_ITERATIONS):
     """Many starts (K, 3, 3), (K, 3) refined at once, each by :func:`levenberg_marquardt`'s steps and stops;
-    returns their poses (Rs, ts). ``without`` (K,): a touch each start's problem leaves out
-    (:meth:`.problem.Problem.evaluate_batch`). The steps are fixture-frame twists, as ``evaluate_batch`` gives
-    the Jacobian: ``x -> R (exp(omega) x + v) + t``."""
+    returns their poses (Rs, ts) and costs (K,), the sums of their squared rows. ``without`` (K,): a touch each
+    start's problem leaves out (:meth:`.problem.Problem.evaluate_batch`). The steps are fixture-frame twists, as
+    ``evaluate_batch`` gives the Jacobian: ``x -> R (exp(omega) x + v) + t``."""
     Rs, ts = np.array(rotations, dtype=np.float64), np.array(translations, dtype=np.float64)
     without = None if without is None else np.asarray(without)
 
@@ -117,4 +117,4 @@ def levenberg_marquardt_batch(problem, rotations, translations, without=None, ma
             if not trying.any():
                 break
         active = active[~(trying | stop)]  # (still trying after 12: no step lowers its cost)
-    return Rs, ts
+    return Rs, ts, cost

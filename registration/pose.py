@@ -72,10 +72,12 @@ def vector_from_rotation(rotation):
 
 
 def rotation_angle(rotation):
-    """Angle (rad) of a rotation matrix, accurate near 0 (atan2 of sine and cosine parts)."""
+    """Angle (rad) of a rotation matrix, or angles (...) of matrices (..., 3, 3), accurate near 0 (atan2 of sine
+    and cosine parts)."""
     R = np.asarray(rotation, dtype=np.float64)
-    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    return float(np.arctan2(0.5 * np.linalg.norm(axis), 0.5 * (np.trace(R) - 1.0)))
+    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    angle = np.arctan2(0.5 * np.linalg.norm(axis, axis=-1), 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0))
+    return float(angle) if angle.ndim == 0 else angle
 
 
 def fixture2meas_from_rt(rotation, translation):

@@ -17,7 +17,7 @@ from .pose import check_fixture2meas
 from .search import mahalanobis, search, threshold_mm2
 from .starts import best_starts, initial_poses
 from .verdict import (EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, chi_square_passes,
-                      inadmissible, judged, same_pose)
+                      inadmissible, judged, same_as_any)
 
 LOCAL_STARTS = 96  # closed-form starts refined when the search does not complete
 
@@ -70,15 +70,19 @@ def solve(problem, initial_pose=None, complete=True, found=None, good_only=False
     followed = problem.point_touches() if extents else None
     # Every start refined, at once where there are several (one alone is refined on its own: cheaper, and it gives
     # its rows), then taken in order: a pose refined already is one solution.
-    refined = [levenberg_marquardt(problem, R, t) for R, t in starts] if len(starts) < 2 else \
-        [(R, t, None, None) for R, t in zip(*levenberg_marquardt_batch(problem, *map(np.array, zip(*starts))))]
-    for k, ((R, t), (R2, t2, r, J)) in enumerate(zip(starts, refined)):
-        if any(same_pose((R2, t2), (s.rotation, s.translation)) for s in solutions):
+    if len(starts) < 2:
+        refined = [(R2, t2, r, J, float(r @ r))
+                   for R2, t2, r, J in (levenberg_marquardt(problem, R, t) for R, t in starts)]
+    else:
+        refined = [(R2, t2, None, None, cost)
+                   for R2, t2, cost in zip(*levenberg_marquardt_batch(problem, *map(np.array, zip(*starts))))]
+    for k, ((R, t), (R2, t2, r, J, cost)) in enumerate(zip(starts, refined)):
+        if good_only and not chi_square_passes(cost, problem.size, 6, problem.sigma):
+            continue  # (it fails the test at rank 6: not good at any rank)
+        if same_as_any((R2, t2), [(s.rotation, s.translation) for s in solutions]):
             continue
         if r is None:
             r, J = problem.evaluate(R2, t2)
-        if good_only and not chi_square_passes(r @ r, len(r), 6, problem.sigma):
-            continue  # (it fails the test at rank 6: not good at any rank)
         solution = judged(problem, Solution(R2, t2, r, J), length)
         if k < len(extents):
             # The region's extent about where the search left it, and how far refinement moved the touches.

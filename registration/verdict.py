@@ -25,11 +25,14 @@ SAME_POSE_ROTATION_RAD = 1e-4
 SAME_POSE_TRANSLATION_MM = 1e-3
 
 
-def same_pose(a, b):
-    return (
-        rotation_angle(a[0] @ b[0].T) < SAME_POSE_ROTATION_RAD
-        and np.linalg.norm(a[1] - b[1]) < SAME_POSE_TRANSLATION_MM
-    )
+def same_as_any(pose, others):
+    """Whether a pose (R, t) is one of ``others`` [(R, t)]: turned less than ``SAME_POSE_ROTATION_RAD`` and moved
+    less than ``SAME_POSE_TRANSLATION_MM`` from it (all compared at once)."""
+    if not len(others):
+        return False
+    rotations, translations = (np.array(x) for x in zip(*others))
+    return bool(np.any((rotation_angle(pose[0] @ rotations.transpose(0, 2, 1)) < SAME_POSE_ROTATION_RAD)
+                       & (np.linalg.norm(translations - pose[1], axis=1) < SAME_POSE_TRANSLATION_MM)))
 
 
 @dataclass
