@@ -1290,10 +1290,10 @@ def _read_only(array):
     return array
 
 
-@functools.lru_cache(maxsize=None)
+@functools.lru_cache(maxsize=64)
 def pair_indices(n):
     """Every pair ``i < j`` of n things, ``np.triu_indices(n, 1)``, built once a size (numpy builds an n by n mask
-    each call). Read only."""
+    each call; the last 64 sizes kept). Read only."""
     return tuple(_read_only(index) for index in np.triu_indices(n, 1))
 
 
