@@ -41,7 +41,7 @@ from .touches import build_groups
 from .unlabelled import (assigned, assigned_problem, check_unlabelled, faces_holding, nearest_assignment,
                          solve_unlabelled, surface_features)
 from .uncertainty import covariance, covariance_from_information, sigmas
-from .verdict import Solution, judged, same_as_any
+from .verdict import Solution, distinct, judged
 
 
 def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGMA_MM, ball_radius_mm=0.0,
@@ -168,7 +168,7 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
             # the feature it fits on), or else one printed feature's deviation; never a pose that fails the test.
             if result["culprit"] is not None:
                 left_out = [s for _, relabel, s, _ in explained if relabel is None]
-                good = _distinct(left_out or [s for _, _, s, _ in explained])
+                good = distinct(left_out or [s for _, _, s, _ in explained])
             else:
                 good = [] if explained else [item[-1] for item in off]
             best = good[0] if len(good) == 1 else None
@@ -220,16 +220,8 @@ def _missed(problem, explained):
     """The distinct poses the explanations lead to that, refined with every touch, pass: ones the search missed."""
     refined = [judged(problem, Solution(*levenberg_marquardt(problem, s.rotation, s.translation)), problem.scale())
                for _, _, s, _ in explained]
-    return _distinct([s for s in refined if s.good])
+    return distinct([s for s in refined if s.good])
 
-
-def _distinct(solutions):
-    """The solutions with repeats of one pose left out."""
-    out = []
-    for s in solutions:
-        if not same_as_any((s.rotation, s.translation), [(o.rotation, o.translation) for o in out]):
-            out.append(s)
-    return out
 
 
 MAX_MORE_TOUCHES = 30  # planned touches tried before a target is called out of reach

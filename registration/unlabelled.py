@@ -25,7 +25,7 @@ from .search import first_cells, stand_in_tree, threshold_mm2
 from .solve import Solutions, solve, told_apart
 from .symmetry import core_onto, symmetries
 from .touches import point_touches
-from .verdict import EXTENT_TOLERANCE_MM, same_as_any
+from .verdict import EXTENT_TOLERANCE_MM, distinct
 
 LOCAL_ROUNDS = 2  # a search that stops: each touch put on its nearest feature this many times from each start
 MAX_SEARCHED = 4000  # assignments searched at most, each by the labelled search (3-20 ms): past that it stops
@@ -234,10 +234,8 @@ def solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm=0
                 pose = solutions[0].fixture2meas
             found += solutions
     found.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
-    for s in found:
-        # One pose under two assignments (a touch where two patches meet) is one pose: the better one is kept.
-        if not same_as_any((s.rotation, s.translation), [(k.rotation, k.translation) for k in out]):
-            out.append(s)
+    # One pose under two assignments (a touch where two patches meet) is one pose: the better one is kept.
+    out.extend(distinct(found))
     if not out:
         raise ValueError("no assignment of the unlabelled touches to the features comes near a pose")
     return told_apart(out, sigma_mm)

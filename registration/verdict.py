@@ -35,6 +35,15 @@ def same_as_any(pose, others):
                        & (np.linalg.norm(translations - pose[1], axis=1) < SAME_POSE_TRANSLATION_MM)))
 
 
+def distinct(solutions):
+    """The solutions with repeats of one pose left out, the first of each kept."""
+    out = []
+    for s in solutions:
+        if not same_as_any((s.rotation, s.translation), [(o.rotation, o.translation) for o in out]):
+            out.append(s)
+    return out
+
+
 @dataclass
 class Solution:
     rotation: np.ndarray
