@@ -575,7 +575,8 @@ class Tree:
     def normals(self):
         """Each plane touched three times or more, its normal in the measurement frame where its touches put it,
         whatever the pose, up to its sign, and the signs the other touches leave: (fixture normal, measured
-        normal, phi, signs) (:func:`measured_normal`, :func:`normal_signs`)."""
+        normal, phi, signs) (:func:`measured_normal`, :func:`normal_signs`); and each plane sensor lying on a
+        plane, the sensor's normal, either sign."""
         out = []
         for f, points, reach, idx in self.planes:
             normal = measured_normal(points, reach) if len(points) >= 3 else None
@@ -594,6 +595,14 @@ class Tree:
             heights = np.column_stack([middle - half, middle + half])
             level = f @ self.flat_anchor[idx[0]] + np.array([-1.0, 1.0]) * reach.mean()
             out.append((f, *normal, normal_signs((f, *normal), points, level, self.points[others], heights)))
+        if self.sensors is not None:
+            # Its turn rows alone keep R f within phi of the sensor's normal: L (sin(phi) - tilt) <= sqrt(T)
+            # (:mod:`.sensor_bounds`, the rows that only turn).
+            most = np.sqrt(self.root**2 / self.sensors.weight) / np.sqrt(self.sensors.lever2)
+            for (ctype, s, fx, *_), printed in zip(self.sensors.touches, self.sensors.printed):
+                if ctype.is_locus and ctype.sensor == ctype.fixture == "PL" and most + printed.tilt < 1.0:
+                    out.append((np.asarray(fx["n"], float), np.asarray(s["n"], float),
+                                float(np.arcsin(most + printed.tilt)), (1.0, -1.0)))
         return out
 
     def first_cells(self):
@@ -871,6 +880,11 @@ class Tree:
             constant = square[:, k] - square[:, m]
             slabs.append((on_axes(2.0 * (Pu[:, k] - Pu[:, m]), self.Q), near[:, i] - far[:, j] - constant,
                           far[:, i] - near[:, j] - constant))
+        if self.sensors is not None:
+            planes = self.sensors.slabs(c.R, c.delta, self.box_centre(c), np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1),
+                                        self.root)
+            if planes is not None:
+                slabs.append((on_axes(planes[0], self.Q), planes[1], planes[2]))
         slabs = [slab for slab in slabs if slab[1].size]
         if not slabs:
             return

@@ -22,7 +22,8 @@ largest over the subsets below, each row's least size over the cell over a bound
   ``(R^T n).(q - y) - n.(q_A - c) - rho`` with the plane the sensor's, or ``n.(x' - q) - rho`` with it the
   fixture's; it moves by at most ``delta |q - y_c| + (1 + delta) h`` or ``delta |x - c| + h``; a shift
   moves it one for one and a turn about ``o`` by at most ``|q - o'|`` (``|x - o|``):
-  ``lambda_max <= 1 + lever^2 / L^2``;
+  ``lambda_max <= 1 + lever^2 / L^2``. At ``R0`` the row is linear in y, so a pose that passes keeps y in a slab
+  (:meth:`SensorBounds.slabs`): the row within ``sqrt(slack T)``, its deviation and the turn's part of its move;
 * the distance of two lines, ``|(p_A - p_B).m| - rho``, ``m`` the unit common normal: at the cell's centre
   the closest point ``x_a`` on the sensor's line, ``D_c`` the distance, ``p*`` the closest on the fixture's;
   the distance is ``|(x_a' - p*).m|`` (any points of the two lines will do), and ``x_a'_c - p* = D_c m_c``,
@@ -140,8 +141,33 @@ class SensorBounds:
         """Measurement-frame points (3,) or (K, 3) on the fixture at the cells' centres (K, 3)."""
         return np.einsum("ki,kij->kj", np.broadcast_to(x - self.centroid, (len(R), 3)), R) + yc
 
-    def _locus(self, ctype, s, f, rho, o, printed, R, delta, yc, h):
-        """A plane lying on a plane, a line or a cylinder (either side the plane)."""
+    def slabs(self, R, delta, yc, h, root):
+        """Slabs ``low <= g.y <= high`` (g (K, s, 3), fixture frame; low, high (K, s)) that hold the y of every pose
+        of the cells (as in :meth:`cells`) whose cost passes ``root^2`` (the search's threshold, before
+        ``weight``): each plane sensor's (or plane feature's) offset row is ``value + g.(y - y_c)`` at ``R`` and a
+        turn within delta moves it by at most its swing less h, while a pose that passes keeps it within ``sqrt(slack
+        T)`` and its deviation (module doc)."""
+        limit = root / np.sqrt(self.weight)
+        g, low, high = [], [], []
+        with np.errstate(invalid="ignore", over="ignore"):
+            for (ctype, s, f, rho, o), printed in zip(self.touches, self.printed):
+                if not ctype.is_locus:
+                    continue
+                _, _, offset, swing, _, lever, _, dev, _, _ = self._plane(ctype, s, f, rho, o, printed, R, delta, yc, h)
+                reach = limit * np.sqrt(1.0 + lever**2 / self.lever2) + dev + (swing - h)
+                middle = np.einsum("ki,ki->k", offset[1], yc) - offset[0]
+                g.append(offset[1])
+                low.append(np.where(np.isfinite(reach), middle - reach, -np.inf))
+                high.append(np.where(np.isfinite(reach), middle + reach, np.inf))
+        if not g:
+            return None
+        return np.stack(g, axis=1), np.stack(low, axis=1), np.stack(high, axis=1)
+
+    def _plane(self, ctype, s, f, rho, o, printed, R, delta, yc, h):
+        """A plane lying on a plane, a line or a cylinder (either side the plane), at the cells' centres: its turn
+        rows and their omega-Jacobians, its offset row (value at y_c, m, Jw), how far the cells move that row
+        (swing) and its first-order remainder, the lever, and the row's change with the feature's modes (twist,
+        deviation bound and its remainder); with the radius flag of the offset."""
         c = self.centroid
         kappa = delta**2 / 2.0 + delta**3 / 6.0
         ones = np.ones(len(delta))
@@ -179,6 +205,14 @@ class SensorBounds:
             offset_twist = np.concatenate([cross(f["n"], x), -np.broadcast_to(f["n"], x.shape)], axis=1)
             offset_dev = printed.at(x, swing)
             offset_dev_rest = printed.tilt * swing
+        return turn_rows, turn_jw, offset, swing, offset_rest, lever, offset_twist, offset_dev, offset_dev_rest, radius
+
+    def _locus(self, ctype, s, f, rho, o, printed, R, delta, yc, h):
+        """A plane lying on a plane, a line or a cylinder (either side the plane)."""
+        kappa = delta**2 / 2.0 + delta**3 / 6.0
+        ones = np.ones(len(delta))
+        turn_rows, turn_jw, offset, swing, offset_rest, lever, offset_twist, offset_dev, offset_dev_rest, radius = \
+            self._plane(ctype, s, f, rho, o, printed, R, delta, yc, h)
         turn = np.sqrt(sum(r**2 for r in turn_rows))
         slack = 1.0 + lever**2 / self.lever2
         bound = np.maximum(self.lever2 * np.maximum(turn - delta - printed.tilt, 0.0) ** 2,

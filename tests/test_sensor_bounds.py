@@ -56,6 +56,19 @@ def _cube_plan(face):
     ]
 
 
+def _cube_plane_plan():
+    """Point touches on the cube's front and top, and a plane sensor lying on its left face (which deviates on the
+    printed part)."""
+    s = CUBE
+    point = [0.0, 0.4 * s, 0.3 * s]
+    return [
+        {"feature": "front", "points": [[0.2 * s, 0.0, 0.3 * s], [0.8 * s, 0.0, 0.6 * s]]},
+        {"feature": "top", "points": [[0.3 * s, 0.2 * s, s], [0.7 * s, 0.7 * s, s], [0.5 * s, 0.5 * s, s]]},
+        {"feature": "left", "contact": "PL/F-PL/F", "points": [point],
+         "sensor": {"kind": "plane", "point": point, "normal": [-1.0, 0.0, 0.0]}},
+    ]
+
+
 def _boss_plan():
     """Point touches on the inclined plane and the boss, a line sensor across the boss and a plane sensor lying on
     it (both at the boss's radius)."""
@@ -72,6 +85,8 @@ def _boss_plan():
 @functools.lru_cache(maxsize=None)
 def _case(name):
     """(features, touch plan) of a case: a template's named plan, a design's default plan, or the cube's above."""
+    if name == CUBE_PLANE:
+        return features_from_json(features_document(make("cube", size=CUBE))), _cube_plane_plan()
     if name.startswith("cube, line and cylinder lying on the "):
         return features_from_json(features_document(make("cube", size=CUBE))), _cube_plan(name.split()[-1])
     if name == BOSS:
@@ -83,6 +98,7 @@ def _case(name):
 
 
 BOSS = "inclined-plane-cylinder, line across and plane lying on the boss"
+CUBE_PLANE = "cube, plane sensor lying on the left"
 CASES = ("quarter-sphere paper", "quarter-sphere minimal", "{R}{C-R-C}", "{R}{G3-R}",
          "cube, line and cylinder lying on the top", BOSS)
 # The cases whose bounds are checked on a printed part too, against the test's own rows: not the designs, whose
@@ -544,3 +560,99 @@ def test_flat_touches_beside_line_sensors_are_searched_completely(printed):
         assert result["status"] == "unique"
         error_mm, error_rad = pose_errors(np.array(result["solutions"][0]["pose"]), truth)
         assert error_mm <= 1e-4 and error_rad <= 1e-7
+
+
+def _edge_poses(tree, truth, rng, count, judge=None, turn=1.0):
+    """Poses (R (count, 3, 3), y (count, 3)) on the edge of passing: the truth moved along random twists (their
+    turn scaled by ``turn``) until the test's cost reaches T: ``judge``'s (a :class:`.problem.Problem`, deviations
+    and all on a printed part, times the sensors' weight), by default the tree's own (the touches' and the bounded
+    sensors')."""
+    from test_search import _edge_of_passing
+
+    R, t = truth[:3, :3], truth[:3, 3]
+    scale = np.concatenate([np.full(3, turn / tree.rho.max()), np.ones(3)])
+    weight = 1.0 if judge is None else tree.sensors.weight
+    judge = tree.judge if judge is None else judge
+
+    def cost(twist):
+        r = judge.evaluate(R @ rotation_from_vector(twist[:3]), t + twist[3:])[0]
+        return weight * (r @ r)
+
+    twists = np.array([_edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2) for _ in range(count)])
+    Rs = R @ rotation_from_vector(twists[:, :3])
+    return Rs, np.einsum("kji,kj->ki", Rs, tree.centroid - (t + twists[:, 3:]))
+
+
+@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
+@pytest.mark.parametrize("name", ["quarter-sphere paper", CUBE_PLANE])
+def test_a_plane_sensor_s_normal_starts_the_search_in_boxes_that_hold_every_pose_that_passes(name, printed):
+    """Example One's paper plan (a plane sensor lying on a flat, the datum; a line sensor on the edge, a point on
+    the sphere and one on the other flat) and the cube's (a plane sensor lying on its left face, which deviates
+    on the printed part; points on two other faces), each at 20 random poses, sensors placed with 5 um of noise:
+    the search starts from the boxes the sensor's normal leaves (:meth:`.search.Tree.normals`; on the quarter
+    sphere the tube about it, :func:`.search.tube_turns`; on the cube beside the top's three touches'), which
+    hold the rotation vector of each of 30 poses on the edge of passing; and 20 poses on the edge of the plane
+    sensor's own cost passing turn the fixture's normal to within the cone the search draws about the
+    sensor's (phi: its turn rows' ``sqrt(T) / L``, plus the printed feature's largest turn), some of them past 0.9
+    of it (0.5 printed: the feature's largest turn is a bound these poses do not reach). It fails when the tube's
+    boxes are half as wide, or phi is taken two thirds as wide, or on the printed cube without the feature's
+    turn."""
+    from test_search import in_boxes
+
+    rng = np.random.default_rng(19)
+    reached = 0.0
+    for _ in range(20):
+        problem, truth = _problem(name, rng, 0.005, printed=printed)
+        tree = stand_in_tree(problem, threshold_mm2(problem))[0]
+        plane = next(k for k, (ctype, *_) in enumerate(tree.sensors.touches) if ctype.is_locus)
+        sensed = tree.sensors.touches[plane][1]["n"]
+        f, n, phi, _ = next(normal for normal in tree.normals if np.array_equal(normal[1], sensed))
+        v0, w0 = tree.first_cells()[:2]
+        assert np.max(w0) < 0.2  # (a first-level cell of every rotation: 0.39 rad)
+        Rs, _ = _edge_poses(tree, truth, rng, 30)
+        assert np.all(in_boxes(vector_from_rotation(Rs), v0, w0))
+        judge = Problem([tree.full.groups[len(tree.problem.groups) + plane]], problem.sigma, problem.lever,
+                        problem.tolerance)
+        Rs, ys = _edge_poses(tree, truth, rng, 20, judge)
+        # (Where the sensor's placement noise fails its test at the truth itself, no pose is on the edge.)
+        passing = [np.sum(judge.evaluate(R, tree.centroid - R @ y)[0] ** 2) <= tree.root**2 for R, y in zip(Rs, ys)]
+        angle = np.arccos(np.clip(np.abs(Rs[passing] @ f @ n), -1.0, 1.0))
+        assert np.all(angle <= phi * (1 + 1e-9)), (angle.max(), phi)
+        reached = max(reached, angle.max(initial=0.0) / phi)
+    assert reached > (0.5 if printed else 0.9), reached
+
+
+@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
+@pytest.mark.parametrize("name", PRINTED)
+def test_the_plane_slabs_hold_every_pose_that_passes(name, printed):
+    """Plane sensors lying on planes and bosses, and line and cylinder sensors lying on planes, at a random pose,
+    exact and printed (a long lever, so that a shift moves the offset row alone): for each such sensor, 20 poses on
+    the edge of its own cost passing (half of them moved mostly by a shift, :func:`_edge_poses`), each in 25 cells
+    about it (rotation half-widths from 0.1 mrad to 0.4 rad, y half-widths from 3 um to 30 mm, the pose anywhere
+    in the cell), lie in the slab :meth:`.SensorBounds.slabs` draws for y. It fails when a slab's reach leaves out
+    the cell's turn, or the printed boss's deviation bound, or is taken 0.7 times as wide (not 0.9: the slab holds
+    the offset row's share of the sensor's cost by its whitening's largest eigenvalue, a little loose)."""
+    rng = np.random.default_rng(23)
+    problem, truth = _problem(name, rng, 0.0, LONG_LEVER_MM, printed)
+    tree = stand_in_tree(problem, threshold_mm2(problem))[0]
+    singles = tree.full.groups[len(tree.problem.groups):]
+    planes = [k for k, (ctype, *_) in enumerate(tree.sensors.touches) if ctype.is_locus]
+    least, cut = np.inf, 0
+    for slab, k in enumerate(planes):
+        judge = Problem([singles[k]], problem.sigma, problem.lever, problem.tolerance)
+        Rs, ys = (np.concatenate(pair) for pair in zip(_edge_poses(tree, truth, rng, 10, judge),
+                                                        _edge_poses(tree, truth, rng, 10, judge, 1e-3)))
+        for R, y in zip(Rs, ys):
+            v = vector_from_rotation(R)
+            for _ in range(25):
+                w = np.exp(rng.uniform(np.log(1e-4), np.log(0.4)))
+                half = np.exp(rng.uniform(np.log(0.003), np.log(30.0), 3))
+                v0, centre = v + rng.uniform(-w, w, 3), y + rng.uniform(-1, 1, 3) * half
+                g, low, high = (x[0, slab] for x in tree.sensors.slabs(
+                    rotation_from_vector(v0[None]), np.array([np.sqrt(3) * w]), centre[None],
+                    np.array([np.linalg.norm(half)]), tree.root))
+                assert low <= g @ y + 1e-9 and g @ y <= high + 1e-9, (low, g @ y, high)
+                least = min(least, min(g @ y - low, high - g @ y) / (high - low))
+                cut += high - low < 2.0 * np.abs(g) @ half
+    # The slabs narrow many cells' boxes, and some pose lies within a fifth of a slab's width of its side.
+    assert cut >= 100 * len(planes) and least < 0.2, (cut, least)
