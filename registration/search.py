@@ -755,6 +755,29 @@ class Tree:
 
     # --- the bounds ----------------------------------------------------------------------------------------
 
+    def round_rows(self, c, kappa):
+        """The round touches' rows to first order over the cells: ``value + (u x a).omega + u.y`` (value (K, m),
+        u (K, m, 3)), each off its true distance by at most ``off`` (K, m) mm; ``usable`` (K, m): whether the
+        touch's move D over the cell (its turn, ``kappa`` (K, m) the turn's remainder, and the y box) keeps it off
+        its core (else its row is 0: no model); ``turn`` (K, m): how far its direction from the core turns (rad;
+        inf where not usable). The distance ``|s|`` is convex in the touch's place: above its tangent at s_0, by
+        at most the bend ``|D|^2 / (2 (|s_0| - |D|))``; the model takes half the bend, and is off by the other
+        half either way, and by kappa."""
+        centre = self.box_centre(c)
+        half = 0.5 * (c.yhi - c.ylo)
+        half = np.where(self.aligned[None, self.round], np.linalg.norm(half[:, :2], axis=1)[:, None],
+                        np.linalg.norm(half, axis=1)[:, None])
+        d0, u = self.distances(c.a, centre)
+        d0, u = d0[:, self.round], u[:, self.round]
+        move = c.delta[:, None] * self.rho[self.round] + half + kappa
+        core_gap = d0 + self.offset[self.round] - move  # the least |s| over the move
+        usable = core_gap > 0.0
+        gap = np.where(usable, core_gap, 1.0)
+        bend = np.where(usable, move**2 / (4.0 * gap), 0.0)
+        value = np.where(usable, d0 + bend - np.einsum("kri,ki->kr", u, centre), 0.0)
+        return value, np.where(usable[..., None], u, 0.0), np.where(usable, kappa + bend, 0.0), usable, \
+            np.where(usable, move / gap, np.inf)
+
     def cells(self, v, w, ylo, yhi):
         """Each cell's rotation, touches at ``R0``, y box shrunk to the patches, lower bound of the cost, and its
         first-order model (:meth:`first_order`): a :class:`Cells`."""
@@ -918,7 +941,8 @@ class Tree:
         delta``) and image y: ``value + Jw.omega + m.y``, off the true rows by at most ``remainder`` (mm, the
         root of their squares). A turn puts touch i at ``exp(-omega) a_i = a_i + a_i x omega + e_i``,
         ``|e_i| <= (delta^2/2 + delta^3/6) rho_i``; a round touch's distance ``|s| - r`` (``s`` its offset from
-        the core) departs from its tangent by at most ``|D|^2 / (2 (|s_0| - |D|))`` over a move D. Fills
+        the core) lies above its tangent by at most ``|D|^2 / (2 (|s_0| - |D|))`` over a move D
+        (:meth:`round_rows`). Fills
         ``least``: a lower bound of the model's least cost over ``|omega| <= delta`` and any y (weak
         duality: ``Q0 - b^T (A + lambda I)^-1 b - lambda delta^2`` for any lambda >= 0, y eliminated exactly),
         and what :meth:`leaf_poses` needs."""
@@ -929,26 +953,13 @@ class Tree:
         value = np.einsum("kri,kri->kr", unit, a_rows - self.flat_anchor[self.row_touch])
         remainder2 = np.sum(kappa[:, self.flat] ** 2, axis=1)
         if self.round.any():
-            centre = self.box_centre(c)
-            half = 0.5 * (c.yhi - c.ylo)
-            half = np.where(self.aligned[None, self.round], np.linalg.norm(half[:, :2], axis=1)[:, None],
-                            np.linalg.norm(half, axis=1)[:, None])
-            d0, u = self.distances(c.a, centre)
-            d0, u = d0[:, self.round], u[:, self.round]
-            move = c.delta[:, None] * self.rho[self.round] + half + kappa[:, self.round]
-            core_gap = d0 + self.offset[self.round] - move  # the least |s| over the move
-            with np.errstate(over="ignore"):
-                off = np.where(core_gap > 0.0, kappa[:, self.round] + move**2 / (2.0 * np.maximum(core_gap, 1e-300)),
-                               0.0)
-            usable = (core_gap > 0.0)[..., None]
-            u = np.where(usable, u, 0.0)
+            round_value, u, off, usable, turn = self.round_rows(c, kappa[:, self.round])
             unit = np.concatenate([unit, u], axis=1)
             a_rows = np.concatenate([a_rows, c.a[:, self.round]], axis=1)
-            value = np.concatenate([value, np.where(usable[..., 0], d0 - np.einsum("kri,ki->kr", u, centre), 0.0)],
-                                   axis=1)
+            value = np.concatenate([value, round_value], axis=1)
             remainder2 = remainder2 + np.sum(off**2, axis=1)
         # A round touch whose move may reach its core has no tangent model: the cell is no leaf.
-        c.modelled = np.all(usable[..., 0], axis=1) if self.round.any() else np.ones(K, bool)
+        c.modelled = np.all(usable, axis=1) if self.round.any() else np.ones(K, bool)
         Jw = cross(unit, a_rows)  # row j's change with omega: m . (a x omega) = (m x a) . omega
         touch_rows = unit.shape[1]
         if self.sensors is not None:
@@ -971,8 +982,7 @@ class Tree:
             off_dev = move_all[:, touch] * self.tilt[touch]
             if self.round.any():
                 rounds = slice(len(self.row_touch), None)
-                off_dev[:, rounds] += np.where(usable[..., 0], move / np.maximum(core_gap, 1e-300), np.inf) \
-                    * self.turn_dev[self.round]
+                off_dev[:, rounds] += turn * self.turn_dev[self.round]
             # A stand-in's radius mode along its sensor's normal turns with the cell: off by delta times its size.
             off_dev += c.delta[:, None] * self.radius_dev[touch]
             remainder2 = remainder2 + np.sum(off_dev**2, axis=1)
