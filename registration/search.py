@@ -71,6 +71,8 @@ from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_M
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_FRACTION = 0.25  # a leaf's first-order model is off by at most this much of sqrt(T) (and the deviations) ...
 LEAF_MM = 0.0125  # ... or this (mm), the larger, at first; a region whose pose does not pass is split finer
+NEAR_LEAF = 4.0  # a cell whose remainder is within this many times a leaf's has its model built again over its ellipsoid
+NEAR_PASSES = 2  # ... at most this many times a level
 MAX_CELLS = 150000  # cells at one level, or leaves in all, beyond which the search stops, not complete
 MAX_LEAVES = 60000
 CONTINUUM = f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
@@ -487,15 +489,17 @@ class Tree:
         # Each touch is paired with the one farthest from it across the core (the narrowest slab), at most n pairs.
         projector = np.eye(3) - np.where((self.core == "line")[:, None, None],
                                          np.einsum("ni,nj->nij", self.direction, self.direction), 0.0)
-        pairs = set()
-        for i in np.flatnonzero(self.round):
-            mates = np.flatnonzero(self.round & (owner == owner[i]) & (np.arange(len(owner)) != i))
-            if len(mates):
-                j = mates[np.argmax(np.linalg.norm((b[mates] - b[i]) @ projector[i], axis=1))]
-                pairs.add((min(i, j), max(i, j)))
-        self.pairs = np.array(sorted(pairs), int).reshape(-1, 2)
+        self.pairs = np.zeros((0, 2), int)
+        rounds = np.flatnonzero(self.round)
+        if len(rounds):
+            across_core = np.linalg.norm(np.einsum("mij,mnj->mni", projector[rounds],
+                                                   b[None, rounds] - b[rounds, None]), axis=2)
+            mates = (owner[rounds, None] == owner[None, rounds]) & ~np.eye(len(rounds), dtype=bool)
+            paired = mates.any(axis=1)
+            i, j = rounds[paired], rounds[np.argmax(np.where(mates, across_core, -1.0), axis=1)[paired]]
+            self.pairs = np.unique(np.column_stack([np.minimum(i, j), np.maximum(i, j)]), axis=0).reshape(-1, 2)
         # Each paired touch's projector across its core, once a touch however many pairs it is in.
-        self.paired, pair_index = np.unique(self.pairs, return_inverse=True) if pairs else (np.zeros(0, int),) * 2
+        self.paired, pair_index = np.unique(self.pairs, return_inverse=True) if len(self.pairs) else (np.zeros(0, int),) * 2
         self.pair_index = pair_index.reshape(-1, 2)
         self.paired_projector = projector[self.paired]
         # A sphere's centre touched four times or more lies where its touches put it in the measurement frame,
@@ -505,11 +509,15 @@ class Tree:
         self.centres = []
         for k in range(len(groups)):
             idx = np.flatnonzero((owner == k) & self.round & (self.core == "point"))
-            if len(idx) >= 4 and np.allclose(self.anchor[idx], self.anchor[idx[0]]):
-                lo, hi = shell_box(self.points[idx], self.offset[idx], self.root + self.dev[idx])
-                if self.L is not None and self.radius_own[idx].all():
-                    lo2, hi2 = self.printed_centre(idx)
-                    lo, hi = np.maximum(lo, lo2), np.minimum(hi, hi2)
+            if len(idx) >= 4 and np.all(self.anchor[idx] == self.anchor[idx[0]]):
+                shells = self.printed_centre(idx) if self.L is not None and self.radius_own[idx].all() else None
+                if shells is None:
+                    lo, hi = shell_box(self.points[idx], self.offset[idx], self.root + self.dev[idx])
+                else:
+                    radius, width, move = shells
+                    lo, hi = shell_box(self.points[idx], np.stack([self.offset[idx], radius]),
+                                       np.stack([self.root + self.dev[idx], width]))
+                    lo, hi = np.maximum(lo[0], lo[1] - move), np.minimum(hi[0], hi[1] + move)
                 rel, half = 0.5 * (lo + hi) - self.centroid, 0.5 * (hi - lo)
                 # (the box's middle off the centroid, its half-widths, and how far a unit turn moves its points)
                 self.centres.append((self.anchor[idx[0]], rel, half, np.linalg.norm(rel) + np.linalg.norm(half)))
@@ -689,8 +697,8 @@ class Tree:
                                         deviation_bound_mm(tolerance, g.feature, m.centre[None], q), m.centre))
 
     def printed_centre(self, idx):
-        """A box (lo, hi) holding the image of the centre of a printed sphere touched by ``idx`` (four or more
-        touches on it, point or ball, its own radius).
+        """The shells a printed sphere's centre lies in, touched by ``idx`` (four or more touches on it, point or
+        ball, its own radius): (radius (n,), width (n,), move), None where they leave it open.
 
         A pose that passes has modes ``z = L u``, ``|u|^2 <= q``, with each row ``r_i - n_i.dc - dr`` within
         sqrt(T): the modes move the centre by dc (at most ``centre_move``) and the radius by dr (at most
@@ -698,14 +706,12 @@ class Tree:
         w`` of a radius ``R' = R + dr`` common to the touches, ``w = sqrt(T) + |dc|^2 / (2 (a - |dc|))`` (``|s -
         dc| - (|s| - n.dc)`` lies in ``[0, |dc|^2 / (2 (|s| - |dc|))]``, ``a`` the least ``|s|``): the radical
         slabs of a common radius are ``4 R' w`` wide, wherever dr puts R'. The printed centre's box
-        (:func:`shell_box` with the largest R') grown by the largest ``|dc|`` holds the centre's."""
+        (:func:`shell_box` with the largest R') grown by the largest ``|dc|`` (``move``) holds the centre's."""
         move, grow = self.centre_move[idx[0]], self.radius_grow[idx[0]]
         least = np.min(self.offset[idx] - self.root - self.dev[idx]) - move
         if least <= 0.0:
-            return np.full(3, -np.inf), np.full(3, np.inf)
-        width = self.root + move**2 / (2.0 * least)
-        lo, hi = shell_box(self.points[idx], self.offset[idx] + grow, np.full(len(idx), width))
-        return lo - move, hi + move
+            return None
+        return self.offset[idx] + grow, np.full(len(idx), self.root + move**2 / (2.0 * least)), move
 
     def mode_moves(self, q):
         """What the modes of a pose that passes (``z = L u``, ``|u|^2 <= q``) move, per touch (mm):
@@ -913,6 +919,20 @@ class Tree:
             return
         c.ylo, c.yhi = propagated(slabs, c.ylo, c.yhi, CONTRACT_ROUNDS)
 
+    def closer(self, c):
+        """Held cells built again over their model's ellipsoid, which holds every pose of theirs that may pass
+        (:meth:`ellipsoid`): it shrank their y boxes, and may hold the poses' turn nearer ``R0`` than the cell does
+        (:meth:`turn_reach`); the model and the bounds over these (a smaller turn, a smaller y box) are closer. The
+        cells whose bound then exceeds T are dropped."""
+        c.delta = np.minimum(c.delta, self.turn_reach(c))
+        c = self.first_bound(c)
+        return c.take(c.bound <= self.root**2)
+
+    def turn_reach(self, c):
+        """How far (K,) rad from ``R0`` the turn ``omega`` of any pose of the cells that may pass lies: within the
+        model's ellipsoid's shadow, ``|omega*| + sqrt(slack lambda_max(W_ww))`` (held cells only)."""
+        return np.linalg.norm(c.theta[:, :3], axis=1) + np.sqrt(c.slack * np.linalg.eigvalsh(c.W[:, :3, :3])[:, -1])
+
     def narrowed(self, c):
         """Which cells' rotation boxes narrow to their model's ellipsoid, and the narrower boxes (v, w).
 
@@ -1005,7 +1025,8 @@ class Tree:
         c.alpha, c.V = np.linalg.eigh(A)
         c.alpha = np.maximum(c.alpha, 0.0)
         beta2 = np.einsum("kij,ki->kj", c.V, c.b) ** 2
-        # Newton on the secular equation 1/|p(lambda)| = 1/delta from lambda = 0 (monotone from below).
+        # Newton on the secular equation 1/|p(lambda)| = 1/delta from lambda = 0 (monotone from below), until it
+        # stops moving.
         lam = np.zeros(K)
         for _ in range(8):
             shifted = np.maximum(c.alpha + lam[:, None], 1e-90)
@@ -1015,7 +1036,11 @@ class Tree:
             with np.errstate(over="ignore", invalid="ignore"):
                 step = phi / np.maximum(slope, 1e-300)
             # Any lambda >= 0 gives a bound: a step that does not come out finite is not taken.
-            lam = np.maximum(lam - np.where(np.isfinite(step), step, 0.0), 0.0)
+            new = np.maximum(lam - np.where(np.isfinite(step), step, 0.0), 0.0)
+            settled = np.all(np.abs(new - lam) <= 1e-12 * new)
+            lam = new
+            if settled:
+                break
         shifted = c.alpha + lam[:, None]
         # An axis with no curvature adds nothing without a pull along it, and leaves no bound with one.
         terms = np.where(beta2 > 0.0, beta2 / np.where(shifted > 0.0, shifted, 1.0), 0.0)
@@ -1075,7 +1100,15 @@ class Tree:
                 tries(R[k], self.centroid - R[k] @ y[k])
             if budget is not None and sum(kept) > budget:
                 return None, f"more than {budget} cells with sensors' rows left out: the rest leave the pose weak"
-            leaf = c.modelled & (c.remainder <= fraction * max(self.root, LEAF_MM / LEAF_FRACTION))
+            limit = fraction * max(self.root, LEAF_MM / LEAF_FRACTION)
+            leaf = c.modelled & (c.remainder <= limit)
+            for _ in range(NEAR_PASSES):
+                near = ~leaf & c.modelled & c.held & (c.remainder <= NEAR_LEAF * limit)
+                if not near.any():
+                    break
+                # A cell a little short of a leaf: its model over its ellipsoid may make it one a level sooner.
+                c = Cells.joined([c.take(~near), self.closer(c.take(near))])
+                leaf = c.modelled & (c.remainder <= limit)
             if self.sensors is not None:
                 # Where the model (the touches' and the sensors' rows) leaves a motion free, a leaf's poses are its
                 # whole cell, which must then be as narrow as a settled region.
@@ -1350,25 +1383,28 @@ def largest_swing(u):
 
 
 def shell_box(points, radius, width):
-    """A box (lo, hi) holding every centre within ``radius +- width`` of each of the points (n, 3): the shells'
-    boxes, narrowed by the radical slabs of every pair (|p_i - C|^2 - |p_j - C|^2 is linear in C): the box of
-    the slabs' least-squares solve, then interval propagation (two rounds: more narrow it by little)."""
+    """Boxes (lo, hi) holding every centre within ``radius +- width`` of each of the points (n, 3), for each row
+    of radius and width (n,) or (m, n): the shells' boxes, narrowed by the radical slabs of every pair (|p_i -
+    C|^2 - |p_j - C|^2 is linear in C): the box of the slabs' least-squares solve, then interval propagation (two
+    rounds: more narrow it by little). Each (3,), or (m, 3) for m rows."""
+    rows = np.ndim(radius) == 2 or np.ndim(width) == 2
+    radius, width = np.atleast_2d(radius), np.atleast_2d(width)
     origin = points.mean(axis=0)
     p = points - origin
     near, far = np.maximum(radius - width, 0.0) ** 2, (radius + width) ** 2
-    lo, hi = np.max(p - (radius + width)[:, None], axis=0), np.min(p + (radius + width)[:, None], axis=0)
+    lo, hi = np.max(p - (radius + width)[..., None], axis=1), np.min(p + (radius + width)[..., None], axis=1)
     i, j = pair_indices(len(p))
     g = 2.0 * (p[i] - p[j])
     constant = np.sum(p[i] ** 2, axis=1) - np.sum(p[j] ** 2, axis=1)
-    low, high = constant - (far[i] - near[j]), constant - (near[i] - far[j])  # g.C lies between
+    low, high = constant - (far[:, i] - near[:, j]), constant - (near[:, i] - far[:, j])  # g.C lies between
     u, s, vt = np.linalg.svd(g, full_matrices=False)
     if np.count_nonzero(s > s.max(initial=0.0) * max(g.shape) * np.finfo(float).eps) == 3:  # numpy's matrix_rank
         # Any A with A g = I gives C = A (g C): the least-squares one's box (g's pseudo-inverse).
         A = vt.T @ ((1.0 / s)[:, None] * u.T)
-        mid, half = A @ (0.5 * (low + high)), np.abs(A) @ (0.5 * (high - low))
+        mid, half = 0.5 * (low + high) @ A.T, 0.5 * (high - low) @ np.abs(A).T
         lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
-    lo, hi = propagated([(g, low[None], high[None])], lo[None], hi[None], 2)
-    return lo[0] + origin, hi[0] + origin
+    lo, hi = propagated([(g, low, high)], lo, hi, 2)
+    return (lo + origin, hi + origin) if rows else (lo[0] + origin, hi[0] + origin)
 
 
 def propagated(slabs, lo, hi, rounds):

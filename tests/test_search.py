@@ -318,6 +318,49 @@ def test_one_plane_s_tube_starts_the_search_in_boxes_that_hold_every_pose_that_p
     assert tubes >= 15
 
 
+@pytest.mark.parametrize("name,counts,ball", [c for c, i in zip(CASES, IDS) if i in NARROWED + ("sphere-plate",
+                                                                                         "inclined-plane-cylinder")],
+                         ids=[i for i in IDS if i in NARROWED + ("sphere-plate", "inclined-plane-cylinder")])
+def test_a_cell_built_again_over_its_ellipsoid_keeps_every_pose_that_passes(name, counts, ball):
+    """300 poses on the edge of passing, each in a cell from a fifth of a degree to 17 degrees wide about it: a
+    held cell built again over its model's ellipsoid (:meth:`Tree.closer`: the turn within its reach of ``R0``,
+    the y box shrunk to it) is kept, and holds the pose (its turn within the new ``delta`` of ``R0``, its y in the
+    box), twice over as the search may do. It fails when the turn's reach is taken two thirds as large."""
+    rng = np.random.default_rng(31)
+    problem, R, t = _problem(name, counts, ball, rng)
+    tree = Tree(problem, threshold_mm2(problem))
+    scale = np.concatenate([np.full(3, 1.0 / tree.rho.max()), np.ones(3)])
+
+    def moved(twist):
+        Rk = R @ rotation_from_vector(twist[:3])
+        return Rk, Rk.T @ (tree.centroid - t) + twist[3:]
+
+    def cost(twist):
+        Rk, y = moved(twist)
+        r = tree.judge.evaluate(Rk, tree.centroid - Rk @ y)[0]
+        return r @ r
+
+    closer = 0
+    for _ in range(300):
+        Rk, y = moved(_edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2))
+        v, y = vector_from_rotation(Rk), y @ tree.Q
+        w = np.exp(rng.uniform(np.log(0.003), np.log(0.3)))
+        half = np.exp(rng.uniform(np.log(0.01), np.log(3.0), 3))
+        centre = y + rng.uniform(-1, 1, 3) * half
+        cells = tree.cells((v + rng.uniform(-w, w, 3))[None], np.array([w]), (centre - half)[None],
+                           (centre + half)[None])
+        for _ in range(2):
+            if not (cells.bound[0] <= tree.root**2 and cells.held[0]):
+                break
+            cells = tree.closer(cells)
+            assert len(cells.v) == 1
+            omega = vector_from_rotation(cells.R[0].T @ Rk)  # Rk = R0 exp(omega)
+            assert np.linalg.norm(omega) <= cells.delta[0] * (1 + 1e-9)
+            assert np.all(cells.ylo[0] - 1e-9 <= y) and np.all(y <= cells.yhi[0] + 1e-9)
+            closer += 1
+    assert closer >= 300
+
+
 def _edge_turns(tree, R, t, rng, count=30):
     """Rotation vectors (count, 3) of poses on the edge of passing the tree's test: the truth (R, t) moved along
     a random twist until the test's cost reaches T."""
