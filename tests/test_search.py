@@ -217,6 +217,20 @@ def test_a_narrowed_cell_holds_every_pose_that_passes(name, counts, ball):
     rng = np.random.default_rng(8)
     problem, R, t = _problem(name, counts, ball, rng)
     tree = Tree(problem, threshold_mm2(problem))
+    narrowed = 0
+    for _, v, _, cells in _edge_cells(tree, R, t, rng):
+        narrow, v_narrow, w_narrow = tree.narrowed(cells)
+        if narrow[0]:
+            both = np.array([v, v - 2 * np.pi * v / np.linalg.norm(v)])
+            assert np.any(np.all(np.abs(v_narrow[0] - both) <= w_narrow[0] + 1e-9, axis=1))
+            narrowed += 1
+    assert narrowed >= 50
+
+
+def _edge_cells(tree, R, t, rng, count=300):
+    """``count`` poses on the edge of passing (the truth (R, t) moved along a random twist until the test's cost
+    reaches T), each with a cell about it from a fifth of a degree to 17 degrees and 0.02 to 6 mm wide: (R, its
+    rotation vector, y on the box's axes, the cell as :meth:`Tree.cells` leaves it)."""
     scale = np.concatenate([np.full(3, 1.0 / tree.rho.max()), np.ones(3)])  # rad and mm moving a touch alike
 
     def moved(twist):
@@ -228,21 +242,14 @@ def test_a_narrowed_cell_holds_every_pose_that_passes(name, counts, ball):
         r = tree.judge.evaluate(Rk, tree.centroid - Rk @ y)[0]
         return r @ r
 
-    narrowed = 0
-    for _ in range(300):
+    for _ in range(count):
         Rk, y = moved(_edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2))
         v, y = vector_from_rotation(Rk), y @ tree.Q
         w = np.exp(rng.uniform(np.log(0.003), np.log(0.3)))
         half = np.exp(rng.uniform(np.log(0.01), np.log(3.0), 3))
         centre = y + rng.uniform(-1, 1, 3) * half
-        cells = tree.cells((v + rng.uniform(-w, w, 3))[None], np.array([w]), (centre - half)[None],
-                           (centre + half)[None])
-        narrow, v_narrow, w_narrow = tree.narrowed(cells)
-        if narrow[0]:
-            both = np.array([v, v - 2 * np.pi * v / np.linalg.norm(v)])
-            assert np.any(np.all(np.abs(v_narrow[0] - both) <= w_narrow[0] + 1e-9, axis=1))
-            narrowed += 1
-    assert narrowed >= 50
+        yield Rk, v, y, tree.cells((v + rng.uniform(-w, w, 3))[None], np.array([w]), (centre - half)[None],
+                                   (centre + half)[None])
 
 
 def _edge_of_passing(cost, direction, threshold):
@@ -329,26 +336,8 @@ def test_a_cell_built_again_over_its_ellipsoid_keeps_every_pose_that_passes(name
     rng = np.random.default_rng(31)
     problem, R, t = _problem(name, counts, ball, rng)
     tree = Tree(problem, threshold_mm2(problem))
-    scale = np.concatenate([np.full(3, 1.0 / tree.rho.max()), np.ones(3)])
-
-    def moved(twist):
-        Rk = R @ rotation_from_vector(twist[:3])
-        return Rk, Rk.T @ (tree.centroid - t) + twist[3:]
-
-    def cost(twist):
-        Rk, y = moved(twist)
-        r = tree.judge.evaluate(Rk, tree.centroid - Rk @ y)[0]
-        return r @ r
-
     closer = 0
-    for _ in range(300):
-        Rk, y = moved(_edge_of_passing(cost, rng.normal(size=6) * scale, tree.root**2))
-        v, y = vector_from_rotation(Rk), y @ tree.Q
-        w = np.exp(rng.uniform(np.log(0.003), np.log(0.3)))
-        half = np.exp(rng.uniform(np.log(0.01), np.log(3.0), 3))
-        centre = y + rng.uniform(-1, 1, 3) * half
-        cells = tree.cells((v + rng.uniform(-w, w, 3))[None], np.array([w]), (centre - half)[None],
-                           (centre + half)[None])
+    for Rk, _, y, cells in _edge_cells(tree, R, t, rng):
         for _ in range(2):
             if not (cells.bound[0] <= tree.root**2 and cells.held[0]):
                 break
