@@ -93,6 +93,8 @@ TUBE_BOXES = 512  # rotation boxes about one plane's measured normal a search st
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter than this gives that core no slab
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
+AXES = np.eye(3)  # the y boxes' axes where no line or cylinder is touched: the fixture's own
+AXES.flags.writeable = False
 CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
 MEMO_KEPT = 4096  # values a memoised function (:func:`by_value`) keeps before it forgets them all
 
@@ -502,6 +504,7 @@ class Tree:
         self.paired, pair_index = np.unique(self.pairs, return_inverse=True) if len(self.pairs) else (np.zeros(0, int),) * 2
         self.pair_index = pair_index.reshape(-1, 2)
         self.paired_projector = projector[self.paired]
+        self.paired_across = bool(np.any(self.core[self.paired] == "line"))
         # A sphere's centre touched four times or more lies where its touches put it in the measurement frame,
         # whatever the pose: each touch within its contact offset, give or take sqrt(T) and its deviation bound
         # (no turn), of it; on a printed sphere, the printed centre within sqrt(T) of a common radius
@@ -524,7 +527,7 @@ class Tree:
         # The y boxes' axes: the first touched cylinder's (or line's) axis last, so that the box's first two
         # axes hold its touches' distances exactly and its last needs no split for them.
         lines = np.flatnonzero(self.round & (self.core == "line"))
-        self.Q = np.eye(3)
+        self.Q = AXES
         if len(lines):
             e1, e2 = perpendicular_basis(self.direction[lines[0]])
             self.Q = np.column_stack([e1, e2, self.direction[lines[0]]])
@@ -813,8 +816,11 @@ class Tree:
             f = self.fixing
             core_reach = (self.offset[f][None] + reach[:, f])[..., None]
             core = on_axes(self.anchor[f][None] - c.a[:, f], self.Q)
-            lo[:, f] = np.where(self.fixing_axes, np.maximum(lo[:, f], core - core_reach), lo[:, f])
-            hi[:, f] = np.where(self.fixing_axes, np.minimum(hi[:, f], core + core_reach), hi[:, f])
+            if self.fixing_axes.all():
+                lo[:, f], hi[:, f] = np.maximum(lo[:, f], core - core_reach), np.minimum(hi[:, f], core + core_reach)
+            else:
+                lo[:, f] = np.where(self.fixing_axes, np.maximum(lo[:, f], core - core_reach), lo[:, f])
+                hi[:, f] = np.where(self.fixing_axes, np.minimum(hi[:, f], core + core_reach), hi[:, f])
         turned = np.abs(c.R @ self.Q) if self.centres else None
         for anchor, rel, half, lever in self.centres:
             spread = half @ turned + (c.delta * lever)[:, None]
@@ -902,7 +908,9 @@ class Tree:
         if len(self.pairs):
             i, j = self.pairs.T
             k, m = self.pair_index.T
-            Pu = np.einsum("pij,kpj->kpi", self.paired_projector, c.a[:, self.paired] - self.anchor[self.paired])
+            Pu = c.a[:, self.paired] - self.anchor[self.paired]
+            if self.paired_across:  # (on a point core the projector is the identity)
+                Pu = np.einsum("pij,kpj->kpi", self.paired_projector, Pu)
             square = np.sum(Pu**2, axis=2)
             near = np.maximum(self.offset[None] - reach, 0.0) ** 2
             far = (self.offset[None] + reach) ** 2
@@ -1448,8 +1456,8 @@ def turned_points(points, R):
 
 
 def on_axes(x, Q):
-    """``x @ Q``: x (..., 3) by one matrix Q (3, 3), as one product."""
-    return (x.reshape(-1, 3) @ Q).reshape(x.shape)
+    """``x @ Q``: x (..., 3) by one matrix Q (3, 3), as one product (none for the fixture's own axes)."""
+    return x if Q is AXES else (x.reshape(-1, 3) @ Q).reshape(x.shape)
 
 
 def across(op, x):
@@ -1473,14 +1481,15 @@ def least_over_box(rel, half, direction, point, aligned, radius):
     a line core along the boxes' last axis (``aligned``), within the box's half-diagonal on another line core."""
     # A point core (or an aligned line core, across it): the nearest and farthest points of the box.
     across = np.where(np.asarray(aligned)[:, None], [1.0, 1.0, 0.0], 1.0)
-    near_box = np.linalg.norm(across * np.maximum(np.abs(rel) - half, 0.0), axis=-1)
-    far_box = np.linalg.norm(across * (np.abs(rel) + half), axis=-1)
-    # Another line core: the distance at the box's centre, give or take its half-diagonal.
-    perp = np.linalg.norm(rel - np.einsum("...i,...i->...", rel, direction)[..., None] * direction, axis=-1)
-    diagonal = np.linalg.norm(half, axis=-1)
+    near = np.linalg.norm(across * np.maximum(np.abs(rel) - half, 0.0), axis=-1)
+    far = np.linalg.norm(across * (np.abs(rel) + half), axis=-1)
     exact = point | aligned
-    near = np.where(exact, near_box, np.maximum(perp - diagonal, 0.0))
-    far = np.where(exact, far_box, perp + diagonal)
+    if not np.all(exact):
+        # Another line core: the distance at the box's centre, give or take its half-diagonal.
+        perp = np.linalg.norm(rel - np.einsum("...i,...i->...", rel, direction)[..., None] * direction, axis=-1)
+        diagonal = np.linalg.norm(half, axis=-1)
+        near = np.where(exact, near, np.maximum(perp - diagonal, 0.0))
+        far = np.where(exact, far, perp + diagonal)
     return np.maximum(np.maximum(near - radius, radius - far), 0.0)
 
 
