@@ -71,8 +71,7 @@ from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_M
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_FRACTION = 0.25  # a leaf's first-order model is off by at most this much of sqrt(T) (and the deviations) ...
 LEAF_MM = 0.0125  # ... or this (mm), the larger, at first; a region whose pose does not pass is split finer
-NEAR_LEAF = 4.0  # a cell whose remainder is within this many times a leaf's has its model built again over its ellipsoid
-NEAR_PASSES = 2  # ... at most this many times a level
+NEAR_LEAF = 4.0  # a cell whose remainder is within this many times a leaf's is modelled again about its ellipsoid
 MAX_CELLS = 150000  # cells at one level, or leaves in all, beyond which the search stops, not complete
 MAX_LEAVES = 60000
 CONTINUUM = f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
@@ -95,6 +94,7 @@ SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 AXES = np.eye(3)  # the y boxes' axes where no line or cylinder is touched: the fixture's own
 AXES.flags.writeable = False
+SENSOR_ROWS = ("s_value", "s_jw", "s_m", "s_rem", "s_fine", "s_twist", "s_radius")  # :meth:`Tree.sensor_rows`
 CORNERS = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
 MEMO_KEPT = 4096  # values a memoised function (:func:`by_value`) keeps before it forgets them all
 
@@ -858,14 +858,22 @@ class Tree:
             bound = bound + np.sum(np.maximum(near - turn[live][:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
         if self.sensors is not None:
             # The sensors bounded by their own rows: a cost apart from the touches', and their first-order rows.
-            sensed, *rows = self.sensors.cells(kept.R, kept.delta, self.box_centre(kept),
-                                               np.linalg.norm(0.5 * (kept.yhi - kept.ylo), axis=1))
-            bound = bound + sensed
-            for name, x in zip(("s_value", "s_jw", "s_m", "s_rem", "s_fine", "s_twist", "s_radius"), rows):
+            bound = bound + self.sensor_rows(kept)
+            for name in SENSOR_ROWS:
+                x = getattr(kept, name)
                 setattr(c, name, np.zeros((len(v),) + x.shape[1:], x.dtype))
                 getattr(c, name)[live] = x
         c.ylo[live], c.yhi[live], c.zeroth[live] = kept.ylo, kept.yhi, bound
         return c
+
+    def sensor_rows(self, c):
+        """The bounded sensors' cost bound over the cells (K,); their first-order rows (``SENSOR_ROWS``) filled in
+        (:meth:`.sensor_bounds.SensorBounds.cells`)."""
+        sensed, *rows = self.sensors.cells(c.R, c.delta, self.box_centre(c),
+                                           np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1))
+        for name, x in zip(SENSOR_ROWS, rows):
+            setattr(c, name, x)
+        return sensed
 
     def first_bound(self, c):
         """The cells' first-order model and bound ``first``, ``bound`` the larger of the two, and the y boxes
@@ -928,18 +936,25 @@ class Tree:
         c.ylo, c.yhi = propagated(slabs, c.ylo, c.yhi, CONTRACT_ROUNDS)
 
     def closer(self, c):
-        """Held cells built again over their model's ellipsoid, which holds every pose of theirs that may pass
-        (:meth:`ellipsoid`): it shrank their y boxes, and may hold the poses' turn nearer ``R0`` than the cell does
-        (:meth:`turn_reach`); the model and the bounds over these (a smaller turn, a smaller y box) are closer. The
-        cells whose bound then exceeds T are dropped."""
-        c.delta = np.minimum(c.delta, self.turn_reach(c))
-        c = self.first_bound(c)
-        return c.take(c.bound <= self.root**2)
+        """Held cells modelled again about their model's ellipsoid, which holds every pose of theirs that may pass
+        (:meth:`ellipsoid`): over the y boxes it shrank, and about the turn ``R0 exp(omega*)`` of its centre, within
+        ``r`` (:meth:`turn_reach`; ``exp`` moves a turn no farther than its rotation vector moves) and within
+        ``delta + |omega*|`` as the cell is. The bounds and the model hold for the poses that may pass, not the
+        whole cell: a cell whose bound exceeds T holds none, one whose model is then close is a leaf (its
+        rotation box, which only joins leaves into regions, is the cell's), and any other is to be split as it
+        was."""
+        star = c.theta[:, :3]
+        c.delta = np.minimum(self.turn_reach(c), c.delta + np.linalg.norm(star, axis=1))
+        c.R = c.R @ rotation_from_vector(star)
+        c.a = turned_points(self.points - self.centroid, c.R)
+        if self.sensors is not None:
+            self.sensor_rows(c)
+        return self.first_bound(c)
 
     def turn_reach(self, c):
-        """How far (K,) rad from ``R0`` the turn ``omega`` of any pose of the cells that may pass lies: within the
-        model's ellipsoid's shadow, ``|omega*| + sqrt(slack lambda_max(W_ww))`` (held cells only)."""
-        return np.linalg.norm(c.theta[:, :3], axis=1) + np.sqrt(c.slack * np.linalg.eigvalsh(c.W[:, :3, :3])[:, -1])
+        """How far (K,) rad from ``R0 exp(omega*)`` the turn of any pose of the cells that may pass lies: the
+        shadow of the model's ellipsoid on omega, ``sqrt(slack lambda_max(W_ww))`` (held cells only)."""
+        return np.sqrt(c.slack * np.linalg.eigvalsh(c.W[:, :3, :3])[:, -1])
 
     def narrowed(self, c):
         """Which cells' rotation boxes narrow to their model's ellipsoid, and the narrower boxes (v, w).
@@ -953,7 +968,7 @@ class Tree:
         it holds every pose of the cell that passes (with the y box the cell has)."""
         star = c.theta[:, :3]
         angle = np.linalg.norm(c.v, axis=1) + c.delta
-        reach = np.sqrt(c.slack * np.linalg.eigvalsh(c.W[:, :3, :3])[:, -1])
+        reach = self.turn_reach(c)
         half = np.minimum(angle, NARROW_ANGLE) / 2.0
         w = half / np.sin(half) * np.minimum(reach, 2.0 * c.delta)
         narrow = c.held & (np.linalg.norm(star, axis=1) <= c.delta) & (angle <= NARROW_ANGLE) & (w <= NARROW_GAIN * c.w)
@@ -1110,12 +1125,16 @@ class Tree:
                 return None, f"more than {budget} cells with sensors' rows left out: the rest leave the pose weak"
             limit = fraction * max(self.root, LEAF_MM / LEAF_FRACTION)
             leaf = c.modelled & (c.remainder <= limit)
-            for _ in range(NEAR_PASSES):
-                near = ~leaf & c.modelled & c.held & (c.remainder <= NEAR_LEAF * limit)
-                if not near.any():
-                    break
-                # A cell a little short of a leaf: its model over its ellipsoid may make it one a level sooner.
-                c = Cells.joined([c.take(~near), self.closer(c.take(near))])
+            near = np.flatnonzero(~leaf & c.modelled & c.held & (c.remainder <= NEAR_LEAF * limit))
+            if len(near):
+                # A cell a little short of a leaf, modelled again about its ellipsoid (:meth:`closer`): dropped,
+                # a leaf a level sooner, or split as it was.
+                closer = self.closer(c.take(near))
+                passes = closer.bound <= self.root**2
+                now = passes & closer.modelled & (closer.remainder <= limit)
+                stay = np.ones(len(c.v), bool)
+                stay[near[~passes | now]] = False
+                c = Cells.joined([c.take(stay), closer.take(now)])
                 leaf = c.modelled & (c.remainder <= limit)
             if self.sensors is not None:
                 # Where the model (the touches' and the sensors' rows) leaves a motion free, a leaf's poses are its
