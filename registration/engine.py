@@ -223,7 +223,6 @@ def _missed(problem, explained):
     return distinct([s for s in refined if s.good])
 
 
-
 MAX_MORE_TOUCHES = 30  # planned touches tried before a target is called out of reach
 
 

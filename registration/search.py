@@ -336,8 +336,10 @@ def tube_pairs(planes, lines):
     plane's (fixture normal, touches (n, 3), reach (n,) mm) and each line's (fixture axis, touches (n, 3), how far
     each may lie from the axis (n,) mm): on a plane ``|(R f).d| <= r_i + r_j`` (each touch within its reach of
     it); on a line ``|(R a).d| >= |d| cos(c)``, c its pair's cone (:func:`pair_cones`, span ``s_i + s_j``)."""
-    pairs = [(f, points[j] - points[i], reach[i] + reach[j], 0.0) for f, points, reach, *_ in planes
-             for i, j in itertools.combinations(range(len(points)), 2)]
+    pairs = []
+    for f, points, reach, *_ in planes:
+        i, j = pair_indices(len(points))
+        pairs += [(f, dk, span, 0.0) for dk, span in zip(points[j] - points[i], reach[i] + reach[j])]
     for a, points, across_mm in lines:
         i, j = pair_indices(len(points))
         d = points[j] - points[i]
