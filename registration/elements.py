@@ -103,6 +103,13 @@ def cross(a, b):
     return out
 
 
+def dot(a, b):
+    """The dot product of vectors along the last axis, broadcast: a reduction over a short last axis costs numpy
+    several times the products."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def perpendicular_basis(v):
     """Two unit vectors perpendicular to unit ``v`` and to each other, shape like ``v``."""
     v = np.asarray(v, dtype=float)

@@ -34,7 +34,9 @@ bound ``e_i``, and the first order carries the part's deviation modes as
 unknowns (:meth:`Tree.modes`). A cell whose bound exceeds ``T`` holds no pose
 that passes and is dropped; so is a cell in which no ``y`` keeps every touch
 within reach of its patch's box (:func:`.patches.patch_box`) and within the
-slabs that each touch's reach puts ``y`` in (:meth:`Tree.contract`). A cell left is
+slabs that each touch's reach puts ``y`` in, and each sensor's rows or given
+contact point (:meth:`Tree.contract`; with no point touch, three of the latter
+bound ``y`` by themselves). A cell left is
 split (its rotation box in eight while a turn moves the touches more than its
 ``y`` box is wide, else its ``y`` box in two), or its rotation box narrowed to
 the model's ellipsoid (:meth:`Tree.narrowed`), until its first-order model is
@@ -91,6 +93,8 @@ FIRST_TURN_PLANES = 4  # planes' normals a search starts from at most (two signs
 TUBE_BOXES = 512  # rotation boxes about one plane's measured normal a search starts from at most, each sign
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter than this gives that core no slab
+SLAB_TRIPLES = 8  # sets of three located sensors' slabs whose box bounds y (:func:`slab_triples`), at most ...
+SLAB_DETERMINANT = 0.1  # ... each with normals this far from coplanar (the box's widths grow as 1 / |det|)
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 AXES = np.eye(3)  # the y boxes' axes where no line or cylinder is touched: the fixture's own
 AXES.flags.writeable = False
@@ -414,9 +418,9 @@ def beyond_pi(v, w):
 
 class Tree:
     """The branch and bound of the module doc over one problem's point and ball touches (y the image of
-    their centroid); the last groups, one touch each, may be sensors' stand-ins
-    (:class:`.stand_ins.StandIn`). ``sensors``: (group, k) of sensor touches bounded by their own rows
-    (:mod:`.sensor_bounds`), their bound times ``weight``."""
+    their centroid, or where there is none of the bounded sensors' placement centres); the last groups, one
+    touch each, may be sensors' stand-ins (:class:`.stand_ins.StandIn`). ``sensors``: (group, k) of sensor
+    touches bounded by their own rows (:mod:`.sensor_bounds`), their bound times ``weight``."""
 
     def __init__(self, problem, threshold, stand_ins=(), sensors=(), weight=1.0):
         self.problem = problem.point_touches()
@@ -433,15 +437,17 @@ class Tree:
         self.judge = None if printed_stand_ins else self.full if problem.tolerance is None and not self.sensors_apart \
             else Problem(groups + ([] if self.sensors_apart else singles), problem.sigma, problem.lever, problem.tolerance)
         self.root = float(np.sqrt(threshold))
-        if not groups:
+        if not groups and not sensors:
             return
-        self.points = np.concatenate([g.points for g in groups])
-        self.centroid = self.points.mean(axis=0)  # y is its image
+        # y is the image of the touches' centroid (of the sensors' placement centres where no point is touched).
+        self.points = np.concatenate([g.points for g in groups]) if groups else np.zeros((0, 3))
+        self.centroid = (self.points if groups else np.array([g.centre[k] for g, k in sensors])).mean(axis=0)
         b = self.points - self.centroid
         self.rho = np.linalg.norm(b, axis=1)
         self.modes(groups, problem.tolerance, threshold / problem.sigma**2, stand_ins, [g for g, _ in sensors])
         if sensors:
-            self.sensors = SensorBounds(sensors, problem.lever, self.centroid, weight, self.printed)
+            self.sensors = SensorBounds(sensors, problem.lever, self.centroid, weight, self.printed,
+                                        EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM)
         # The points a region's extent follows: the touches, and where bounded sensors are placed.
         self.markers = self.points if self.sensors is None else np.vstack([self.points, self.sensors.markers])
         self.marker_rho = np.linalg.norm(self.markers - self.centroid, axis=1)
@@ -455,20 +461,22 @@ class Tree:
             direction += [np.zeros(3) if d is None else np.asarray(d, float)] * g.count
             offset += list(contact_offset(g))
             boxes += [patch_box(g.feature)] * g.count
-        self.core, self.anchor, self.direction = np.array(core), np.array(anchor), np.array(direction)
+        self.core = np.array(core, dtype="<U5")
+        self.anchor, self.direction = np.array(anchor).reshape(-1, 3), np.array(direction).reshape(-1, 3)
         self.offset = np.array(offset, float)
         self.flat = (self.core == "plane") | (self.offset == 0.0)
         self.round = ~self.flat
         # Each touch's patch box, grown by how far a touch that passes may lie off its patch: the patch's
         # tolerance and widening, its distance off the surface, a ball's radius.
-        self.patch_low, self.patch_high = np.array([box[0] for box in boxes]), np.array([box[1] for box in boxes])
+        self.patch_low = np.array([box[0] for box in boxes]).reshape(-1, 3)
+        self.patch_high = np.array([box[1] for box in boxes]).reshape(-1, 3)
         grow = patch_growth(self.root, self.dev, self.offset)
         self.low, self.high = self.patch_low - grow[:, None], self.patch_high + grow[:, None]
         self.mode_moves(threshold / problem.sigma**2)
         # Flat touches' rows one by one: unit vectors m_j spanning each touch's row space (a plane's normal,
         # the two directions across a line, three across a point), and the anchor moved out by a ball's radius.
         self.flat_anchor = self.anchor + np.where(self.core == "plane", self.offset, 0.0)[:, None] * self.direction
-        self.owner = owner = np.concatenate([[k] * g.count for k, g in enumerate(groups)])  # each touch's group
+        self.owner = owner = np.repeat(np.arange(len(groups)), [g.count for g in groups]).astype(int)  # touch's group
         flat = np.flatnonzero(self.flat)
         spans = [row_span(self.core[i] == "plane", self.direction[i]) for i in flat]
         self.row_touch = np.repeat(flat, [len(m) for m in spans]).astype(int)
@@ -562,6 +570,15 @@ class Tree:
         low, high = np.where(bounded[:, None], self.low, 0.0), np.where(bounded[:, None], self.high, 0.0)
         self.patch_middle, self.patch_width = 0.5 * (low + high), high - low
         self.patch_half = np.where(bounded[:, None], 0.5 * self.patch_width @ np.abs(self.Q), np.inf)
+        # The located sensors' slabs across their axes (:meth:`.sensor_bounds.SensorBounds.located`), on the box's
+        # axes, and three of them at a time that bound y on their own (:func:`slab_triples`).
+        self.axial_normals = np.array([d for _, _, d, *_ in self.sensors.axial]).reshape(-1, 3) @ self.Q \
+            if self.sensors is not None else np.zeros((0, 3))
+        self.triples = slab_triples(self.axial_normals)
+        # How much farther than their slabs a turn moves the box they bound where no point is touched (their
+        # box's half-diagonal over its slabs' half-width, the least over the triples; :meth:`leaves`).
+        self.spread = 1.0 if len(self.points) or not self.triples else \
+            min(np.linalg.norm(np.abs(inverse) @ np.ones(3)) for _, inverse in self.triples)
 
     @functools.cached_property
     def planes(self):
@@ -631,10 +648,11 @@ class Tree:
     @functools.cached_property
     def fixes_pose(self):
         """Whether the rows can fix a pose: their largest rank at a few rotations (it drops at special ones), the
-        touches' centroid on the touched patches' centre. (The bounds hold either way: :mod:`.unlabelled` searches
-        assignments whose rows leave motions free, for where no region is left.)"""
-        groups = self.problem.groups
-        if not groups:
+        touches' centroid on the touched patches' centre; with no point touch, only where the located sensors'
+        slabs bound y. (The bounds hold either way: :mod:`.unlabelled` searches assignments whose rows leave
+        motions free, for where no region is left.)"""
+        groups = self.full.groups
+        if not groups or not (self.problem.groups or self.triples):
             return False
         with np.errstate(invalid="ignore"):  # an unbounded patch's box has no middle: 0 there
             middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
@@ -828,8 +846,9 @@ class Tree:
             spread = half @ turned + (c.delta * lever)[:, None]
             middle = (anchor - rel @ c.R) @ self.Q
             c.ylo, c.yhi = np.maximum(c.ylo, middle - spread), np.minimum(c.yhi, middle + spread)
-        c.ylo = np.maximum(c.ylo, across(np.maximum, lo))
-        c.yhi = np.minimum(c.yhi, across(np.minimum, hi))
+        if len(self.points):
+            c.ylo = np.maximum(c.ylo, across(np.maximum, lo))
+            c.yhi = np.minimum(c.yhi, across(np.minimum, hi))
         flat = None
         if self.flat.any():
             # q(y) = sum (value + m.y)^2 >= q_min + h |y - y*|^2 outside the box's reach of y*.
@@ -901,9 +920,11 @@ class Tree:
         its turn moves it at most ``delta rho_i``); a flat row ``value + m.y`` lies in ``[-s_i, s_i]``, and two
         round touches on one core, at ``D_i in [r_i - s_i, r_i + s_i]`` from it, have ``D_i^2 - D_j^2 =
         |P u_i|^2 - |P u_j|^2 + 2 P (u_i - u_j) . y`` (``u = a - anchor``, ``P`` the projector across the
-        core). Each slab ``l <= g.y <= u`` narrows each axis of the box to what the other axes leave (interval
-        propagation, in rounds over all slabs at once). ``reach`` (K, n): the ``s_i``; ``value`` (K, rows): the
-        flat rows at ``y = 0``."""
+        core). The bounded sensors add theirs (:meth:`.sensor_bounds.SensorBounds.slabs`, ``located``: a located
+        contact point's across its feature's axis, three of which narrow the box to the parallelepiped they hold,
+        :func:`boxed`). Each slab ``l <= g.y <= u`` narrows each axis of the box to what the other axes leave
+        (interval propagation, in rounds over all slabs at once). ``reach`` (K, n): the ``s_i``; ``value`` (K,
+        rows): the flat rows at ``y = 0``."""
         # The flat rows' and the slabs' directions are every cell's: one array of them, not one a cell.
         g = [self.row_unit @ self.Q]
         low, high = [-value - reach[:, self.row_touch]], [-value + reach[:, self.row_touch]]
@@ -914,6 +935,13 @@ class Tree:
             g.append(self.slab_normal @ self.Q)
             low.append(-radius - along)
             high.append(radius - along)
+        if len(self.axial_normals):
+            a, b = self.sensors.located(c.R, c.delta)
+            for rows, inverse in self.triples:
+                c.ylo, c.yhi = boxed(inverse, a[:, rows], b[:, rows], c.ylo, c.yhi)
+            g.append(self.axial_normals)
+            low.append(a)
+            high.append(b)
         slabs = [(np.concatenate(g), np.concatenate(low, axis=1), np.concatenate(high, axis=1))]
         if len(self.pairs):
             i, j = self.pairs.T
@@ -1149,7 +1177,7 @@ class Tree:
                 return Cells.joined(done), ""
             # A turn that moves the touches, or the bounded sensors' placement centres, more than the round touches'
             # y box is wide is split first (a sensor far from the touches pins the turn down).
-            turn = c.delta * self.marker_rho.max()
+            turn = c.delta * self.marker_rho.max() * self.spread
             shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) \
                 if self.round.any() or self.sensors is not None else np.zeros(len(c.v))
             if self.centres:
@@ -1434,6 +1462,24 @@ def shell_box(points, radius, width):
         lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
     lo, hi = propagated([(g, low, high)], lo, hi, 2)
     return (lo + origin, hi + origin) if rows else (lo[0] + origin, hi[0] + origin)
+
+
+def slab_triples(normals, most=SLAB_TRIPLES):
+    """Of slabs with these unit normals (s, 3), at most ``most`` sets of three that bound a box by themselves, the
+    best conditioned first: (indices (3,), the inverse (3, 3) of their normals' matrix), each with ``|det| >=
+    SLAB_DETERMINANT``."""
+    sets = list(itertools.combinations(range(len(normals)), 3))
+    det = np.array([abs(np.linalg.det(normals[list(k)])) for k in sets])
+    order = [k for k in np.argsort(-det, kind="stable")[:most] if det[k] >= SLAB_DETERMINANT] if sets else []
+    return [(np.array(sets[k]), np.linalg.inv(normals[list(sets[k])])) for k in order]
+
+
+def boxed(inverse, low, high, lo, hi):
+    """Boxes (K, 3) narrowed to the box that three slabs ``low <= N y <= high`` (low, high (K, 3); N^-1 =
+    ``inverse``) hold: y = N^-1 z, z in the box of the slabs' bounds."""
+    centre = 0.5 * (low + high) @ inverse.T
+    half = 0.5 * (high - low) @ np.abs(inverse).T
+    return np.maximum(lo, centre - half), np.minimum(hi, centre + half)
 
 
 def propagated(slabs, lo, hi, rounds):

@@ -34,7 +34,18 @@ largest over the subsets below, each row's least size over the cell over a bound
   closest point on the fixture's line, by the envelope theorem), ``<= D_o (1 + 1/s^2) + e_o`` (``D_o`` the
   distance of ``o``'s foot on the sensor's line from the fixture's line, ``e_o`` that of ``o`` from its
   foot, ``s >= s_c - delta``): ``lambda_max <= 1 + lever^2 / L^2``. Where ``s_c <= delta`` the lines may
-  turn parallel in the cell: no bound.
+  turn parallel in the cell: no bound. At ``R0`` the signed distance ``u_c.(x_a' - p*_c)`` is linear in y, and
+  the true one, ``u.(x_a' - p*_c)``, is it times ``u.u_c >= 1 - |du|^2 / 2``, give or take ``delta |x_a - c|``
+  (x_a's turn) and ``|y - y_c| |du|`` (``x_a' - p*_c`` off ``u_c``, zero at the centre): a pose that passes,
+  its distance within ``rho`` plus ``sqrt(slack T)`` and its deviation, keeps y in a slab
+  (:meth:`SensorBounds.slabs`).
+
+A sensor whose contact point x is given (``located``) on a cylinder or a line with an axial interval [t0, t1]
+holds y in a slab whatever its rows: at a pose the verdict admits (:func:`.verdict.inadmissible`) x projects onto
+the feature's patch, its axial parameter ``(x' - p).d`` within the interval widened by the verdict's tolerance and
+widening, and the cell's turn moves it by at most ``delta |x - c|`` (:meth:`SensorBounds.located`). Three such
+slabs with independent axes bound y by themselves: a plan of line sensors alone, their contact points given, is
+searched completely (:class:`.search.Tree`).
 
 On a printed part (:class:`Printed`) the test's rows are ``r - J_d z``, ``J_d`` the rows' change as the
 fixture's feature moves by its modes (a twist ``(omega_f, v_f)``, moving a point p by ``D(p) = omega_f x p +
@@ -59,7 +70,7 @@ generated standalone ``register.py``.
 
 import numpy as np
 
-from .elements import cross
+from .elements import cross, dot
 from .stand_ins import touch_side
 
 LINE_KINDS = ("L", "C")  # elements whose core is a line
@@ -98,19 +109,40 @@ class SensorBounds:
     bounds' factor (the search's threshold is divided by its stand-ins' factor, the sensors' cost not);
     ``printed``: each touch's :class:`Printed` feature on a printed part."""
 
-    def __init__(self, touches, lever_mm, centroid, weight=1.0, printed=None):
+    def __init__(self, touches, lever_mm, centroid, weight=1.0, printed=None, admitted_mm=0.0):
         self.lever2 = float(lever_mm) ** 2
         self.centroid = np.asarray(centroid, float)
         self.weight = float(weight)
         self.touches = [(group.ctype, touch_side(group.sensor, group.count, k),
                          touch_side(group.fixture, group.count, k), float(group.rho[k]),
                          np.asarray(group.centre[k], float)) for group, k in touches]
+        # Each cylinder or line with an axial interval [t0, t1] on which touches' contact points x are given
+        # (``located``): at a pose the verdict admits, each x's axial parameter lies in it, widened by at most
+        # ``admitted_mm`` (:meth:`located`). Each: the points x (n, 3), the axis's point and direction, t0 and t1.
+        axial = {}
+        for group, k in touches:
+            feature = group.feature
+            if group.located and feature.core()[0] == "line" and feature.extent.interval is not None:
+                axial.setdefault(feature.id, (feature, []))[1].append(np.asarray(group.centre[k], float))
+        self.axial = [(np.array(x), feature.point, feature.core()[2], feature.extent.interval[0] - admitted_mm,
+                       feature.extent.interval[1] + admitted_mm) for feature, x in axial.values()]
         self.printed = [EXACT] * len(touches) if printed is None else list(printed)
         # Where the sensors are placed (measurement frame): the points a region's extent follows besides the touches.
         self.markers = np.array([o for *_, o in self.touches]).reshape(-1, 3)
+        # The loci one by one, then the pairs of lines all at once (:meth:`_crossing`): each line pair's sensor point
+        # and direction, fixture point and direction, placement centre, rho, and whether the fixture's is a cylinder.
+        self.loci = [k for k, (ctype, *_) in enumerate(self.touches) if ctype.is_locus]
+        self.crossings = [k for k, (ctype, *_) in enumerate(self.touches) if not ctype.is_locus]
+        pairs = [self.touches[k] for k in self.crossings]
+        self.pair_lines = tuple(np.array([side[key] for _, sensor, fixture, *_ in pairs
+                                          for side in ((sensor, fixture)[j],)], float).reshape(-1, 3)
+                                for j, key in ((0, "p"), (0, "d"), (1, "p"), (1, "d")))
+        self.pair_centre = np.array([o for *_, o in pairs], float).reshape(-1, 3)
+        self.pair_rho = np.array([rho for *_, rho, _ in pairs], float)
+        self.pair_fixture_c = np.array([ctype.fixture == "C" for ctype, *_ in pairs], bool)
         # Each row's touch: a plane on a plane has three rows, a plane and a line or a cylinder two, two lines one.
-        counts = [1 if not ctype.is_locus else 3 if ctype.sensor == ctype.fixture else 2 for ctype, *_ in self.touches]
-        self.row_touch = np.repeat(np.arange(len(counts)), counts)
+        counts = [3 if self.touches[k][0].sensor == self.touches[k][0].fixture else 2 for k in self.loci]
+        self.row_touch = np.concatenate([np.repeat(np.array(self.loci, int), counts), self.crossings]).astype(int)
 
     def cells(self, R, delta, yc, h):
         """Over cells of rotations within ``delta`` (K,) rad of ``R`` (K, 3, 3) and images within ``h`` (K,) mm
@@ -121,11 +153,10 @@ class SensorBounds:
         by ``twist.(omega_f, v_f)`` as its touch's feature (``row_touch``) moves by that twist and by ``radius``
         per mm of its radius (module doc). A row whose model does not hold over a cell is zero there, and
         ``usable`` (K,) says whether all hold."""
-        parts = []
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            for (ctype, s, f, rho, o), printed in zip(self.touches, self.printed):
-                one = self._locus if ctype.is_locus else self._lines
-                parts.append(one(ctype, s, f, rho, o, printed, R, delta, yc, h))
+            parts = [self._locus(*self.touches[k], self.printed[k], R, delta, yc, h) for k in self.loci]
+            if self.crossings:
+                parts.append(self._lines(R, delta, yc, h))
         bound = self.weight * sum(np.where(np.isfinite(b), b, 0.0) for b, *_ in parts)
         value, Jw, m, remainder, usable, twist, radius = (np.concatenate([part[k] for part in parts], axis=1)
                                                           for k in range(1, 8))
@@ -137,6 +168,19 @@ class SensorBounds:
         twist, radius = root * np.where(fine[..., None], twist, 0.0), root * np.where(fine, radius, 0.0)
         return bound, value, Jw, m, remainder, np.all(fine, axis=1), twist, radius
 
+    def located(self, R, delta):
+        """Slabs ``low <= d.y <= high`` (low, high (K, s)), one across each axis d of ``axial``, that hold the y of
+        every pose of the cells (rotations within ``delta`` (K,) rad of R (K, 3, 3)) that the verdict admits:
+        each located touch's axial parameter ``(x' - p).d``, ``x' = R^T (x - c) + y``, within its widened
+        interval, and a turn within delta moves x' by at most ``delta |x - c|``."""
+        low, high = [], []
+        for x, p, d, t0, t1 in self.axial:
+            along = (x - self.centroid) @ R @ d - p @ d  # (K, n)
+            turn = delta[:, None] * np.linalg.norm(x - self.centroid, axis=1)
+            low.append(np.max(t0 - along - turn, axis=1))
+            high.append(np.min(t1 - along + turn, axis=1))
+        return np.stack(low, axis=1), np.stack(high, axis=1)
+
     def _moved(self, x, R, yc):
         """Measurement-frame points (3,) or (K, 3) on the fixture at the cells' centres (K, 3)."""
         return np.einsum("ki,kij->kj", np.broadcast_to(x - self.centroid, (len(R), 3)), R) + yc
@@ -146,22 +190,34 @@ class SensorBounds:
         of the cells (as in :meth:`cells`) whose cost passes ``root^2`` (the search's threshold, before
         ``weight``): each plane sensor's (or plane feature's) offset row is ``value + g.(y - y_c)`` at ``R`` and a
         turn within delta moves it by at most its swing less h, while a pose that passes keeps it within ``sqrt(slack
-        T)`` and its deviation (module doc)."""
+        T)`` and its deviation; two lines' signed distance at ``R`` is ``g.y`` plus a constant, within its reach of
+        ``rho`` (module doc). The loci's slabs first, then the pairs of lines'."""
         limit = root / np.sqrt(self.weight)
-        g, low, high = [], [], []
-        with np.errstate(invalid="ignore", over="ignore"):
-            for (ctype, s, f, rho, o), printed in zip(self.touches, self.printed):
-                if not ctype.is_locus:
-                    continue
-                _, _, offset, swing, _, lever, _, dev, _, _ = self._plane(ctype, s, f, rho, o, printed, R, delta, yc, h)
-                reach = limit * np.sqrt(1.0 + lever**2 / self.lever2) + dev + (swing - h)
-                middle = np.einsum("ki,ki->k", offset[1], yc) - offset[0]
-                g.append(offset[1])
-                low.append(np.where(np.isfinite(reach), middle - reach, -np.inf))
-                high.append(np.where(np.isfinite(reach), middle + reach, np.inf))
+        g, middle, reach = [], [], []
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            for k in self.loci:
+                ctype, s, f, rho, o = self.touches[k]
+                _, _, offset, swing, _, lever, _, dev, _, _ = self._plane(ctype, s, f, rho, o, self.printed[k], R,
+                                                                          delta, yc, h)
+                g.append(offset[1][:, None])
+                middle.append((np.einsum("ki,ki->k", offset[1], yc) - offset[0])[:, None])
+                reach.append((limit * np.sqrt(1.0 + lever**2 / self.lever2) + dev + (swing - h))[:, None])
+            if self.crossings:
+                # Two lines' signed distance at R, u.(a + y - p*), is the true one's times u.u_R >= 1 - du^2/2, give
+                # or take the turn's move and |y - y_c| du across u (module doc); the true one's size is within
+                # the reach of rho.
+                least_sine, u, _, a, foot_f, du, arm, slack, dev, _ = self._crossing(R, delta, yc, h)
+                dl, hl = delta[:, None], h[:, None]
+                size = (self.pair_rho + limit * np.sqrt(slack) + dev + dl * arm + hl * du) / (1.0 - du**2 / 2.0)
+                g.append(u)
+                middle.append(-dot(u, a - foot_f))
+                reach.append(np.where(least_sine > 0.0, size, np.inf))
         if not g:
             return None
-        return np.stack(g, axis=1), np.stack(low, axis=1), np.stack(high, axis=1)
+        middle, reach = np.concatenate(middle, axis=1), np.concatenate(reach, axis=1)
+        finite = np.isfinite(reach)
+        low, high = np.where(finite, middle - reach, -np.inf), np.where(finite, middle + reach, np.inf)
+        return np.concatenate(g, axis=1), low, high
 
     def _plane(self, ctype, s, f, rho, o, printed, R, delta, yc, h):
         """A plane lying on a plane, a line or a cylinder (either side the plane), at the cells' centres: its turn
@@ -231,53 +287,70 @@ class SensorBounds:
         return bound, value * scale[:, None], Jw * scale[:, None, None], m * scale[:, None, None], \
             remainder * scale[:, None], usable, twist * scale[:, None, None], radii * scale[:, None]
 
-    def _lines(self, ctype, s, f, rho, o, printed, R, delta, yc, h):
-        """A line (or a cylinder's axis) at ``rho`` from another."""
+    def _crossing(self, R, delta, yc, h):
+        """The pairs of lines at the cells' centres (module doc), (K, s) each: the sine of their angle less delta
+        (``low``), the common normal ``u`` (K, s, 3) signed to make the distance positive there, the distance D_c,
+        the sensor's closest point's image ``a`` (K, s, 3; y = 0) and its foot ``foot_f`` on the fixture's line,
+        how far u turns (``du``) and a turn moves ``a`` (``arm``, per rad), the whitening's ``slack`` and the
+        printed features' deviation bound ``dev`` and remainder ``dev_rest``."""
         c = self.centroid
-        kappa = delta**2 / 2.0 + delta**3 / 6.0
-        d = s["d"] @ R
-        m = cross(d, f["d"][None])
-        sine = np.linalg.norm(m, axis=1)
-        p = self._moved(s["p"], R, yc)
+        sp, sd, fp, fd = self.pair_lines
+        dl, hl = delta[:, None], h[:, None]
+        d = sd @ R  # (K, s, 3): R^T d per pair
+        m = cross(d, fd[None])
+        sine = np.sqrt(dot(m, m))
+        p = (sp - c) @ R + yc[:, None]
         # The closest point on the sensor's line at the cells' centres, along d from p: t = f_w / (1 - cos^2).
-        w = f["p"] - p
-        cosine = d @ f["d"]
-        t = (np.einsum("ki,ki->k", d, w) - cosine * (w @ f["d"])) / sine**2
-        closest = s["p"][None] + t[:, None] * s["d"][None]  # measurement frame
-        signed = np.einsum("ki,ki->k", p - f["p"], m) / sine
+        w = fp[None] - p
+        cosine = dot(d, fd)
+        t = (dot(d, w) - cosine * dot(w, fd)) / sine**2
+        closest = sp[None] + t[..., None] * sd[None]  # measurement frame
+        signed = dot(p - fp, m) / sine
         distance = np.abs(signed)
         # How far the common normal turns over the cell: m moves by at most delta, its direction by asin(delta / s).
-        du = np.where(delta < sine, 2.0 * np.sin(0.5 * np.arcsin(np.minimum(delta / sine, 1.0))), 2.0)
-        arm = np.linalg.norm(closest - c, axis=1)
-        swing = delta * arm + h + distance * du**2 / 2.0  # (x_a' - p*).u = D_c u_c.u + (x_a' - x_a'_c).u
-        least = np.maximum(distance - swing - rho, rho - distance - swing)
+        du = np.where(dl < sine, 2.0 * np.sin(0.5 * np.arcsin(np.minimum(dl / sine, 1.0))), 2.0)
+        arm = np.sqrt(dot(closest - c, closest - c))
         # The placement centre's foot on the sensor's line, and that foot's distance from the fixture's line.
-        foot = s["p"] + ((o - s["p"]) @ s["d"]) * s["d"]
-        off = np.linalg.norm(o - foot)
-        g = self._moved(foot, R, yc) - f["p"]
-        apart = np.linalg.norm(g - np.outer(g @ f["d"], f["d"]), axis=1) + delta * np.linalg.norm(foot - c) + h
-        low = sine - delta
+        foot = sp + np.einsum("si,si->s", self.pair_centre - sp, sd)[:, None] * sd
+        off = np.linalg.norm(self.pair_centre - foot, axis=1)
+        g = (foot - c) @ R + yc[:, None] - fp
+        across = g - dot(g, fd)[..., None] * fd
+        apart = np.sqrt(dot(across, across)) + dl * np.linalg.norm(foot - c, axis=1) + hl
+        low = sine - dl
         lever = np.where(low > 0.0, apart * (1.0 + 1.0 / low**2) + off, np.inf)
         slack = 1.0 + lever**2 / self.lever2
-        # The distance (x_a' - p*).u along the common normal u signed to make it positive at the centre, p* the
-        # closest point on the fixture's line: linear in (omega, y) but for u's turn and the Rodrigues remainder.
-        u = np.where(signed < 0.0, -1.0, 1.0)[:, None] * m / sine[:, None]
-        a = self._moved(closest, R, np.zeros_like(yc))
-        x = a + yc
-        foot_f = f["p"] + ((x - f["p"]) @ f["d"])[:, None] * f["d"]
-        value = np.einsum("ki,ki->k", a - foot_f, u) - rho
-        remainder = distance * du**2 / 2.0 + (delta * arm + kappa * arm + h) * du + kappa * arm
-        # On a printed part the row moves by -u.D(p*); p* moves by at most ``shift`` over the cell (module doc).
-        twist = np.concatenate([cross(u, foot_f), -u], axis=1)
-        if printed.tilt or printed.dev:
-            shift = np.where(low > 0.0, (delta * arm + h + distance * du) / low, np.inf)
-            dev = printed.at(foot_f, shift)
-            least = least - dev
-            remainder = remainder + du * dev + printed.tilt * shift
+        u = np.where(signed < 0.0, -1.0, 1.0)[..., None] * m / sine[..., None]
+        a = (closest - c) @ R
+        foot_f = fp + dot(a + yc[:, None] - fp, fd)[..., None] * fd
+        dev, dev_rest = np.zeros_like(low), np.zeros_like(low)
+        tilt, most = (np.array([getattr(self.printed[k], key) for k in self.crossings]) for key in ("tilt", "dev"))
+        if tilt.any() or most.any():
+            # The row moves by -u.D(p*); p* moves by at most ``shift`` over the cell (module doc).
+            mode_centre = np.array([self.printed[k].centre for k in self.crossings])
+            shift = np.where(low > 0.0, (dl * arm + hl + distance * du) / low, np.inf)
+            far = np.sqrt(dot(foot_f - mode_centre, foot_f - mode_centre)) + shift
+            dev = most + np.where(tilt > 0.0, tilt * far, 0.0)
+            dev_rest = du * dev + np.where(tilt > 0.0, tilt * shift, 0.0)
+        return low, u, distance, a, foot_f, du, arm, slack, dev, dev_rest
+
+    def _lines(self, R, delta, yc, h):
+        """The pairs of lines (a line or a cylinder's axis at ``rho`` from another): their bounds' sum (K,) and
+        their rows (K, s), as :meth:`cells` returns them."""
+        kappa = (delta**2 / 2.0 + delta**3 / 6.0)[:, None]
+        dl, hl, rho = delta[:, None], h[:, None], self.pair_rho
+        low, u, distance, a, foot_f, du, arm, slack, dev, dev_rest = self._crossing(R, delta, yc, h)
+        swing = dl * arm + hl + distance * du**2 / 2.0  # (x_a' - p*).u = D_c u_c.u + (x_a' - x_a'_c).u
+        least = np.maximum(distance - swing - rho, rho - distance - swing) - dev
+        # The distance (x_a' - p*).u along the common normal u: linear in (omega, y) but for u's turn and the
+        # Rodrigues remainder.
+        value = dot(a - foot_f, u) - rho
+        remainder = distance * du**2 / 2.0 + (dl * arm + kappa * arm + hl) * du + kappa * arm + dev_rest
+        twist = np.concatenate([cross(u, foot_f), -u], axis=2)
         bound = np.where(low > 0.0, np.maximum(least, 0.0) ** 2 / slack, 0.0)
+        bound = np.sum(np.where(np.isfinite(bound), bound, 0.0), axis=1)
         # With rho > 0 the unsigned distance is the signed one only where it keeps its sign over the cell.
         usable = (low > 0.0) & ((rho == 0.0) | (distance > swing))
         scale = 1.0 / np.sqrt(slack)
-        radius = np.full(len(delta), -1.0 if ctype.fixture == "C" else 0.0)  # the distance holds its radius
-        return bound, (value * scale)[:, None], (cross(u, a) * scale[:, None])[:, None], (u * scale[:, None])[:, None], \
-            (remainder * scale)[:, None], usable[:, None], (twist * scale[:, None])[:, None], (radius * scale)[:, None]
+        radius = np.where(self.pair_fixture_c, -1.0, 0.0)  # the distance holds its radius
+        return bound, value * scale, cross(u, a) * scale[..., None], u * scale[..., None], remainder * scale, usable, \
+            twist * scale[..., None], radius * scale

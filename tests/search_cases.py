@@ -47,7 +47,7 @@ TRUE_POSE_RANGE_MM = 100.0  # true fixture origins are uniform in this cube abou
 NOMINAL_TWIST = np.concatenate([np.radians(5.0) * np.array([0.6, 0.0, 0.8]), [3.0, 4.0, 0.0]])  # rad, mm
 DISPLACEMENT_POINTS = 400  # patch points over which two poses are compared
 PLAIN_SPREAD_MM = 1.0 / 30.0  # a pose determined this well (each touch's standard deviation) is not weak
-BOSSES = "{C-R-C}" * 6  # a design of six bosses (line sensors in its plan; touched here by a point probe)
+BOSSES = "{C-R-C}" * 6  # a design of six bosses (line sensors in its plan; touched by a point probe or those)
 
 
 @functools.lru_cache(maxsize=None)
@@ -213,6 +213,10 @@ CASES = [
     # The same on the printed part, beside the balls' stand-ins (off their faces, at the balls' centres).
     Case("{R}{C-R-C} design (default plan), printed", "{R}{C-R-C}", (0.0, SIGMA_MM), plan="default", printed=True),
     Case("{R}{G3-R} design (default plan), printed", "{R}{G3-R}", (0.0, SIGMA_MM), plan="default", printed=True),
+    # Line sensors alone, two round each of six leaning bosses, their contact points given: no point touch bounds
+    # the translation, their slabs across the bosses' axes do.
+    Case("{C-R-C}x6 design (default plan)", BOSSES, (0.0, SIGMA_MM), plan="default"),
+    Case("{C-R-C}x6 design (default plan), printed", BOSSES, (0.0, SIGMA_MM), plan="default", printed=True),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),

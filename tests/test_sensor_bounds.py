@@ -13,6 +13,7 @@ from fixturecad.build import features_document
 from fixturecad.registration.defaults import SENSOR_LEVER_MM
 from fixturecad.registration.deviations import deviation_rows
 from fixturecad.registration.tolerance import deviated
+from fixturecad.registration.verdict import EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.features import features_from_json
 from fixturecad.registration.pose import pose_errors, random_rotation, rotation_from_vector, vector_from_rotation
@@ -99,8 +100,9 @@ def _case(name):
 
 BOSS = "inclined-plane-cylinder, line across and plane lying on the boss"
 CUBE_PLANE = "cube, plane sensor lying on the left"
+BOSSES = "{C-R-C}" * 6  # six leaning bosses, two line sensors round each, their contact points given: no point touch
 CASES = ("quarter-sphere paper", "quarter-sphere minimal", "{R}{C-R-C}", "{R}{G3-R}",
-         "cube, line and cylinder lying on the top", BOSS)
+         "cube, line and cylinder lying on the top", BOSS, BOSSES)
 # The cases whose bounds are checked on a printed part too, against the test's own rows: not the designs, whose
 # stand-ins lie off their features (the test's deviations are not known over them; tests/search_cases.py judges them).
 PRINTED = ("quarter-sphere paper", "quarter-sphere minimal", "cube, line and cylinder lying on the top", BOSS)
@@ -570,7 +572,7 @@ def _edge_poses(tree, truth, rng, count, judge=None, turn=1.0):
     from test_search import _edge_of_passing
 
     R, t = truth[:3, :3], truth[:3, 3]
-    scale = np.concatenate([np.full(3, turn / tree.rho.max()), np.ones(3)])
+    scale = np.concatenate([np.full(3, turn / (tree.rho if len(tree.rho) else tree.marker_rho).max()), np.ones(3)])
     weight = 1.0 if judge is None else tree.sensors.weight
     judge = tree.judge if judge is None else judge
 
@@ -622,23 +624,24 @@ def test_a_plane_sensor_s_normal_starts_the_search_in_boxes_that_hold_every_pose
     assert reached > (0.5 if printed else 0.9), reached
 
 
-@pytest.mark.parametrize("printed", [False, True], ids=["exact", "printed"])
-@pytest.mark.parametrize("name", PRINTED)
-def test_the_plane_slabs_hold_every_pose_that_passes(name, printed):
-    """Plane sensors lying on planes and bosses, and line and cylinder sensors lying on planes, at a random pose,
-    exact and printed (a long lever, so that a shift moves the offset row alone): for each such sensor, 20 poses on
-    the edge of its own cost passing (half of them moved mostly by a shift, :func:`_edge_poses`), each in 25 cells
-    about it (rotation half-widths from 0.1 mrad to 0.4 rad, y half-widths from 3 um to 30 mm, the pose anywhere
-    in the cell), lie in the slab :meth:`.SensorBounds.slabs` draws for y. It fails when a slab's reach leaves out
-    the cell's turn, or the printed boss's deviation bound, or is taken 0.7 times as wide (not 0.9: the slab holds
-    the offset row's share of the sensor's cost by its whitening's largest eigenvalue, a little loose)."""
+@pytest.mark.parametrize("name,printed", [pytest.param(name, printed, id=f"{name}-{'printed' if printed else 'exact'}")
+                                           for name in PRINTED + (BOSSES,) for printed in (False, True)])
+def test_the_sensors_slabs_hold_every_pose_that_passes(name, printed):
+    """Plane sensors lying on planes and bosses, line and cylinder sensors lying on planes, and line sensors round
+    bosses, at a random pose, exact and printed (a long lever, so that a shift moves the offset row alone): for
+    each such sensor, 20 poses on the edge of its own cost passing (half of them moved mostly by a shift,
+    :func:`_edge_poses`), each in 25 cells about it (rotation half-widths from 0.1 mrad to 0.4 rad, y half-widths
+    from 3 um to 30 mm, the pose anywhere in the cell), lie in the slab :meth:`.SensorBounds.slabs` draws for y.
+    It fails when a slab's reach leaves out the cell's turn, or the printed boss's deviation bound, or is taken
+    0.7 times as wide (not 0.9: the slab holds the offset row's share of the sensor's cost by its whitening's
+    largest eigenvalue, a little loose)."""
     rng = np.random.default_rng(23)
     problem, truth = _problem(name, rng, 0.0, LONG_LEVER_MM, printed)
     tree = stand_in_tree(problem, threshold_mm2(problem))[0]
     singles = tree.full.groups[len(tree.problem.groups):]
-    planes = [k for k, (ctype, *_) in enumerate(tree.sensors.touches) if ctype.is_locus]
     least, cut = np.inf, 0
-    for slab, k in enumerate(planes):
+    touches = tree.sensors.loci + tree.sensors.crossings  # the slabs' order
+    for slab, k in enumerate(touches):
         judge = Problem([singles[k]], problem.sigma, problem.lever, problem.tolerance)
         Rs, ys = (np.concatenate(pair) for pair in zip(_edge_poses(tree, truth, rng, 10, judge),
                                                         _edge_poses(tree, truth, rng, 10, judge, 1e-3)))
@@ -652,7 +655,46 @@ def test_the_plane_slabs_hold_every_pose_that_passes(name, printed):
                     rotation_from_vector(v0[None]), np.array([np.sqrt(3) * w]), centre[None],
                     np.array([np.linalg.norm(half)]), tree.root))
                 assert low <= g @ y + 1e-9 and g @ y <= high + 1e-9, (low, g @ y, high)
-                least = min(least, min(g @ y - low, high - g @ y) / (high - low))
+                if high - low < np.inf:
+                    least = min(least, min(g @ y - low, high - g @ y) / (high - low))
                 cut += high - low < 2.0 * np.abs(g) @ half
     # The slabs narrow many cells' boxes, and some pose lies within a fifth of a slab's width of its side.
-    assert cut >= 100 * len(planes) and least < 0.2, (cut, least)
+    assert cut >= 100 * len(touches) and least < 0.2, (cut, least)
+
+
+@pytest.mark.parametrize("side", ["high", "low"])
+def test_a_located_contact_point_s_slab_holds_every_pose_the_verdict_admits(side):
+    """The six-boss design's line sensors, their contact points given: at 20 poses a boss (turned up to 0.3 rad
+    from a random one and shifted along the boss's axis until one of its contact points lies on the edge of what
+    the verdict admits, its patch widened as far as :func:`.verdict.inadmissible` widens it: each point judged by
+    the feature's own ``contains``), each in 25 cells about it (as above), y lies in the slab across the boss's
+    axis that :meth:`.SensorBounds.located` draws. It fails without the widening or the cell's turn; some pose
+    lies within a tenth of the slab's width of its side."""
+    rng = np.random.default_rng(29)
+    problem, truth = _problem(BOSSES, rng)
+    tree = stand_in_tree(problem, threshold_mm2(problem))[0]
+    widened = EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM
+    features = {g.feature.id: g.feature for g in tree.full.groups}
+    least = np.inf
+    for slab, (x, p, d, *_) in enumerate(tree.sensors.axial):
+        feature = next(f for f in features.values() if np.array_equal(f.point, p) and np.array_equal(f.core()[2], d))
+        for _ in range(20):
+            R = truth[:3, :3] @ rotation_from_vector(rng.normal(size=3) * 0.1)
+            y = R.T @ (tree.centroid - truth[:3, 3]) + rng.normal(size=3)
+            along = (x - tree.centroid) @ R @ d + (y - p) @ d  # each point's axial parameter at (R, y)
+            # ... shifted along the axis so that the farthest point lies on the widened patch's edge.
+            if side == "high":
+                y = y + (feature.extent.interval[1] + widened - 1e-9 - along.max()) * d
+            else:
+                y = y + (feature.extent.interval[0] - widened + 1e-9 - along.min()) * d
+            local = (x - tree.centroid) @ R + y
+            assert np.all(feature.contains(local, widened)) and not np.all(feature.contains(local, 0.9 * widened))
+            v = vector_from_rotation(R)
+            for _ in range(25):
+                w = np.exp(rng.uniform(np.log(1e-4), np.log(0.4)))
+                v0 = v + rng.uniform(-w, w, 3)
+                low, high = (b[0, slab] for b in tree.sensors.located(rotation_from_vector(v0[None]),
+                                                                      np.array([np.sqrt(3) * w])))
+                assert low <= d @ y + 1e-9 and d @ y <= high + 1e-9, (low, d @ y, high)
+                least = min(least, min(d @ y - low, high - d @ y) / (high - low))
+    assert least < 0.1, least
