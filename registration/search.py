@@ -94,7 +94,8 @@ TUBE_BOXES = 512  # rotation boxes about one plane's measured normal a search st
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter than this gives that core no slab
 SLAB_TRIPLES = 8  # sets of three located sensors' slabs whose box bounds y (:func:`slab_triples`), at most ...
-SLAB_DETERMINANT = 0.1  # ... each with normals this far from coplanar (the box's widths grow as 1 / |det|)
+SLAB_DETERMINANT = 0.01  # ... each with normals this far from coplanar (the box's widths grow as 1 / |det|; a wide
+# box is still a bound, which the sensors' own slabs narrow)
 BIG_MM = 1e9  # an unbounded side of a y box, in the propagation's arithmetic
 AXES = np.eye(3)  # the y boxes' axes where no line or cylinder is touched: the fixture's own
 AXES.flags.writeable = False

@@ -217,6 +217,10 @@ CASES = [
     # the translation, their slabs across the bosses' axes do.
     Case("{C-R-C}x6 design (default plan)", BOSSES, (0.0, SIGMA_MM), plan="default"),
     Case("{C-R-C}x6 design (default plan), printed", BOSSES, (0.0, SIGMA_MM), plan="default", printed=True),
+    # Plane sensors alone, two lying on each of three bosses, two of whose axes are near parallel: the slabs across
+    # the axes bound y loosely (1 / |det| = 21 times their width), the sensors' own slabs narrow it.
+    Case("{G3-R}x3 design (default plan)", "{G3-R}" * 3, (0.0, SIGMA_MM), plan="default"),
+    Case("{G3-R}x3 design (default plan), printed", "{G3-R}" * 3, (0.0, SIGMA_MM), plan="default", printed=True),
     Case("collinear 4-3-2 cube", "cube", (SIGMA_MM,), _collinear),
     Case("near-degenerate 3-2-1 cube", "cube", (0.0, SIGMA_MM), _diagonal),
     Case("one touch 0.5 mm off, cube 3-3-3", "cube", (SIGMA_MM,), _offset_touch),

@@ -101,8 +101,9 @@ def _case(name):
 BOSS = "inclined-plane-cylinder, line across and plane lying on the boss"
 CUBE_PLANE = "cube, plane sensor lying on the left"
 BOSSES = "{C-R-C}" * 6  # six leaning bosses, two line sensors round each, their contact points given: no point touch
+PLANES_ON_BOSSES = "{G3-R}" * 3  # three bosses, two plane sensors lying on each (two axes near parallel): the same
 CASES = ("quarter-sphere paper", "quarter-sphere minimal", "{R}{C-R-C}", "{R}{G3-R}",
-         "cube, line and cylinder lying on the top", BOSS, BOSSES)
+         "cube, line and cylinder lying on the top", BOSS, BOSSES, PLANES_ON_BOSSES)
 # The cases whose bounds are checked on a printed part too, against the test's own rows: not the designs, whose
 # stand-ins lie off their features (the test's deviations are not known over them; tests/search_cases.py judges them).
 PRINTED = ("quarter-sphere paper", "quarter-sphere minimal", "cube, line and cylinder lying on the top", BOSS)
@@ -625,7 +626,8 @@ def test_a_plane_sensor_s_normal_starts_the_search_in_boxes_that_hold_every_pose
 
 
 @pytest.mark.parametrize("name,printed", [pytest.param(name, printed, id=f"{name}-{'printed' if printed else 'exact'}")
-                                           for name in PRINTED + (BOSSES,) for printed in (False, True)])
+                                           for name in PRINTED + (BOSSES, PLANES_ON_BOSSES)
+                                           for printed in (False, True)])
 def test_the_sensors_slabs_hold_every_pose_that_passes(name, printed):
     """Plane sensors lying on planes and bosses, line and cylinder sensors lying on planes, and line sensors round
     bosses, at a random pose, exact and printed (a long lever, so that a shift moves the offset row alone): for
