@@ -578,7 +578,7 @@ class Tree:
         self.triples = slab_triples(self.axial_normals)
         # How much farther than their slabs a turn moves the box they bound where no point is touched (their
         # box's half-diagonal over its slabs' half-width, the least over the triples; :meth:`leaves`).
-        self.spread = 1.0 if len(self.points) or not self.triples else \
+        self.turn_spread = 1.0 if len(self.points) or not self.triples else \
             min(np.linalg.norm(np.abs(inverse) @ np.ones(3)) for _, inverse in self.triples)
 
     @functools.cached_property
@@ -1178,7 +1178,7 @@ class Tree:
                 return Cells.joined(done), ""
             # A turn that moves the touches, or the bounded sensors' placement centres, more than the round touches'
             # y box is wide is split first (a sensor far from the touches pins the turn down).
-            turn = c.delta * self.marker_rho.max() * self.spread
+            turn = c.delta * self.marker_rho.max() * self.turn_spread
             shift = np.linalg.norm(0.5 * (c.yhi - c.ylo)[:, self.relevant], axis=1) \
                 if self.round.any() or self.sensors is not None else np.zeros(len(c.v))
             if self.centres:

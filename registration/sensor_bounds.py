@@ -89,15 +89,23 @@ def bounded(group):
 
 class Printed:
     """A sensor touch's fixture feature as printed (module doc): ``tilt`` (rad) the largest turn and ``dev`` (mm)
-    the largest move of its mode centre ``centre`` (3,) mm that a pose that passes allows."""
+    the largest move of its mode centre ``centre`` (3,) mm that a pose that passes allows; or several features'
+    (:meth:`stacked`)."""
 
     def __init__(self, tilt, dev, centre):
-        self.tilt, self.dev, self.centre = float(tilt), float(dev), np.asarray(centre, float)
+        self.tilt, self.dev, self.centre = np.asarray(tilt, float), np.asarray(dev, float), np.asarray(centre, float)
+
+    @classmethod
+    def stacked(cls, features):
+        """Several features' at once: their tilts and deviation bounds (s,) and mode centres (s, 3)."""
+        return cls(*(np.array([getattr(f, key) for f in features]).reshape(n) for key, n in
+                     (("tilt", -1), ("dev", -1), ("centre", (-1, 3)))))
 
     def at(self, p, reach=0.0):
-        """The largest move (K,) mm of the feature at points p (K, 3), or anywhere within ``reach`` (K,) of them."""
+        """The largest move (K,) mm of the feature at points p (K, 3), or anywhere within ``reach`` (K,) of them
+        (of each stacked feature at its own points, (K, s))."""
         far = np.linalg.norm(p - self.centre, axis=-1) + reach
-        return self.dev + (self.tilt * far if self.tilt else np.zeros_like(far))
+        return self.dev + np.where(self.tilt > 0.0, self.tilt * far, 0.0)
 
 
 EXACT = Printed(0.0, 0.0, np.zeros(3))  # a feature that does not deviate
@@ -134,9 +142,8 @@ class SensorBounds:
         self.loci = [k for k, (ctype, *_) in enumerate(self.touches) if ctype.is_locus]
         self.crossings = [k for k, (ctype, *_) in enumerate(self.touches) if not ctype.is_locus]
         pairs = [self.touches[k] for k in self.crossings]
-        self.pair_lines = tuple(np.array([side[key] for _, sensor, fixture, *_ in pairs
-                                          for side in ((sensor, fixture)[j],)], float).reshape(-1, 3)
-                                for j, key in ((0, "p"), (0, "d"), (1, "p"), (1, "d")))
+        self.pair_lines = tuple(np.array([pair[side][key] for pair in pairs], float).reshape(-1, 3)
+                                for side, key in ((1, "p"), (1, "d"), (2, "p"), (2, "d")))
         self.pair_centre = np.array([o for *_, o in pairs], float).reshape(-1, 3)
         self.pair_rho = np.array([rho for *_, rho, _ in pairs], float)
         self.pair_fixture_c = np.array([ctype.fixture == "C" for ctype, *_ in pairs], bool)
@@ -323,14 +330,12 @@ class SensorBounds:
         a = (closest - c) @ R
         foot_f = fp + dot(a + yc[:, None] - fp, fd)[..., None] * fd
         dev, dev_rest = np.zeros_like(low), np.zeros_like(low)
-        tilt, most = (np.array([getattr(self.printed[k], key) for k in self.crossings]) for key in ("tilt", "dev"))
-        if tilt.any() or most.any():
+        printed = Printed.stacked([self.printed[k] for k in self.crossings])
+        if printed.tilt.any() or printed.dev.any():
             # The row moves by -u.D(p*); p* moves by at most ``shift`` over the cell (module doc).
-            mode_centre = np.array([self.printed[k].centre for k in self.crossings])
             shift = np.where(low > 0.0, (dl * arm + hl + distance * du) / low, np.inf)
-            far = np.sqrt(dot(foot_f - mode_centre, foot_f - mode_centre)) + shift
-            dev = most + np.where(tilt > 0.0, tilt * far, 0.0)
-            dev_rest = du * dev + np.where(tilt > 0.0, tilt * shift, 0.0)
+            dev = printed.at(foot_f, shift)
+            dev_rest = du * dev + np.where(printed.tilt > 0.0, printed.tilt * shift, 0.0)
         return low, u, distance, a, foot_f, du, arm, slack, dev, dev_rest
 
     def _lines(self, R, delta, yc, h):
