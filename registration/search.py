@@ -462,7 +462,7 @@ class Tree:
             direction += [np.zeros(3) if d is None else np.asarray(d, float)] * g.count
             offset += list(contact_offset(g))
             boxes += [patch_box(g.feature)] * g.count
-        self.core = np.array(core, dtype="<U5")
+        self.core = np.array(core, dtype=str)
         self.anchor, self.direction = np.array(anchor).reshape(-1, 3), np.array(direction).reshape(-1, 3)
         self.offset = np.array(offset, float)
         self.flat = (self.core == "plane") | (self.offset == 0.0)
