@@ -1458,9 +1458,7 @@ def shell_box(points, radius, width):
     u, s, vt = np.linalg.svd(g, full_matrices=False)
     if np.count_nonzero(s > s.max(initial=0.0) * max(g.shape) * np.finfo(float).eps) == 3:  # numpy's matrix_rank
         # Any A with A g = I gives C = A (g C): the least-squares one's box (g's pseudo-inverse).
-        A = vt.T @ ((1.0 / s)[:, None] * u.T)
-        mid, half = 0.5 * (low + high) @ A.T, 0.5 * (high - low) @ np.abs(A).T
-        lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
+        lo, hi = boxed(vt.T @ ((1.0 / s)[:, None] * u.T), low, high, lo, hi)
     lo, hi = propagated([(g, low, high)], lo, hi, 2)
     return (lo + origin, hi + origin) if rows else (lo[0] + origin, hi[0] + origin)
 
@@ -1476,8 +1474,9 @@ def slab_triples(normals, most=SLAB_TRIPLES):
 
 
 def boxed(inverse, low, high, lo, hi):
-    """Boxes (K, 3) narrowed to the box that three slabs ``low <= N y <= high`` (low, high (K, 3); N^-1 =
-    ``inverse``) hold: y = N^-1 z, z in the box of the slabs' bounds."""
+    """Boxes (K, 3) narrowed to the box that slabs ``low <= N y <= high`` (low, high (K, s)) hold, ``inverse`` any
+    A (3, s) with ``A N = I`` (three slabs' N^-1, or more slabs' pseudo-inverse): y = A z, z in the box of the
+    slabs' bounds."""
     centre = 0.5 * (low + high) @ inverse.T
     half = 0.5 * (high - low) @ np.abs(inverse).T
     return np.maximum(lo, centre - half), np.minimum(hi, centre + half)

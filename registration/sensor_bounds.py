@@ -144,7 +144,12 @@ class SensorBounds:
         pairs = [self.touches[k] for k in self.crossings]
         self.pair_lines = tuple(np.array([pair[side][key] for pair in pairs], float).reshape(-1, 3)
                                 for side, key in ((1, "p"), (1, "d"), (2, "p"), (2, "d")))
-        self.pair_centre = np.array([o for *_, o in pairs], float).reshape(-1, 3)
+        # Each placement centre's foot on its sensor's line and how far off it the centre lies (the lever's parts that
+        # no cell moves, :meth:`_crossing`).
+        centre = np.array([o for *_, o in pairs], float).reshape(-1, 3)
+        sp, sd = self.pair_lines[:2]
+        self.pair_foot = sp + dot(centre - sp, sd)[:, None] * sd
+        self.pair_off = np.linalg.norm(centre - self.pair_foot, axis=1)
         self.pair_rho = np.array([rho for *_, rho, _ in pairs], float)
         self.pair_fixture_c = np.array([ctype.fixture == "C" for ctype, *_ in pairs], bool)
         # Each row's touch: a plane on a plane has three rows, a plane and a line or a cylinder two, two lines one.
@@ -318,13 +323,11 @@ class SensorBounds:
         du = np.where(dl < sine, 2.0 * np.sin(0.5 * np.arcsin(np.minimum(dl / sine, 1.0))), 2.0)
         arm = np.sqrt(dot(closest - c, closest - c))
         # The placement centre's foot on the sensor's line, and that foot's distance from the fixture's line.
-        foot = sp + np.einsum("si,si->s", self.pair_centre - sp, sd)[:, None] * sd
-        off = np.linalg.norm(self.pair_centre - foot, axis=1)
-        g = (foot - c) @ R + yc[:, None] - fp
+        g = (self.pair_foot - c) @ R + yc[:, None] - fp
         across = g - dot(g, fd)[..., None] * fd
-        apart = np.sqrt(dot(across, across)) + dl * np.linalg.norm(foot - c, axis=1) + hl
+        apart = np.sqrt(dot(across, across)) + dl * np.linalg.norm(self.pair_foot - c, axis=1) + hl
         low = sine - dl
-        lever = np.where(low > 0.0, apart * (1.0 + 1.0 / low**2) + off, np.inf)
+        lever = np.where(low > 0.0, apart * (1.0 + 1.0 / low**2) + self.pair_off, np.inf)
         slack = 1.0 + lever**2 / self.lever2
         u = np.where(signed < 0.0, -1.0, 1.0)[..., None] * m / sine[..., None]
         a = (closest - c) @ R
