@@ -870,11 +870,13 @@ class Tree:
         c.zeroth = np.where(empty, np.inf, 0.0 if flat is None else flat(slice(None), c.ylo, c.yhi))
         live = np.flatnonzero(c.zeroth <= self.root**2)
         kept = c.take(live)
-        self.contract(kept, reach[live], value[live])
-        bound = np.where(np.any(kept.ylo > kept.yhi, axis=1), np.inf, 0.0)
+        room = self.contract(kept, reach[live], value[live])
+        c.ylo[live], c.yhi[live] = kept.ylo, kept.yhi
+        # A cell the slabs leave no y holds no pose that passes: the rest only for the others.
+        c.zeroth[live[~room]] = np.inf
+        live, kept = live[room], kept.take(room)
         # Zeroth order: each touch within its turn of where it is at R0.
-        if flat is not None:
-            bound = bound + flat(live, kept.ylo, kept.yhi)
+        bound = np.zeros(len(live)) if flat is None else flat(live, kept.ylo, kept.yhi)
         if self.round.any():
             near = self.round_least(kept.a, kept.ylo, kept.yhi)
             bound = bound + np.sum(np.maximum(near - turn[live][:, self.round] - self.dev[self.round], 0.0) ** 2, axis=1)
@@ -885,7 +887,7 @@ class Tree:
                 x = getattr(kept, name)
                 setattr(c, name, np.zeros((len(v),) + x.shape[1:], x.dtype))
                 getattr(c, name)[live] = x
-        c.ylo[live], c.yhi[live], c.zeroth[live] = kept.ylo, kept.yhi, bound
+        c.zeroth[live] = bound
         return c
 
     def sensor_rows(self, c):
@@ -925,7 +927,8 @@ class Tree:
         contact point's across its feature's axis, three of which narrow the box to the parallelepiped they hold,
         :func:`boxed`). Each slab ``l <= g.y <= u`` narrows each axis of the box to what the other axes leave
         (interval propagation, in rounds over all slabs at once). ``reach`` (K, n): the ``s_i``; ``value`` (K,
-        rows): the flat rows at ``y = 0``."""
+        rows): the flat rows at ``y = 0``. Returns whether each cell leaves y any room (K,); the others' boxes are
+        left as they are."""
         # The flat rows' and the slabs' directions are every cell's: one array of them, not one a cell.
         g = [self.row_unit @ self.Q]
         low, high = [-value - reach[:, self.row_touch]], [-value + reach[:, self.row_touch]]
@@ -956,15 +959,26 @@ class Tree:
             constant = square[:, k] - square[:, m]
             slabs.append((on_axes(2.0 * (Pu[:, k] - Pu[:, m]), self.Q), near[:, i] - far[:, j] - constant,
                           far[:, i] - near[:, j] - constant))
-        if self.sensors is not None:
-            planes = self.sensors.slabs(c.R, c.delta, self.box_centre(c), np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1),
-                                        self.root)
-            if planes is not None:
-                slabs.append((on_axes(planes[0], self.Q), planes[1], planes[2]))
+        # A cell one slab misses over its box as it is holds no y (most cells, early on, where sensors' slabs hold
+        # y): the sensors' slabs, the dearest, are drawn for the others alone, and those they leave are narrowed.
         slabs = [slab for slab in slabs if slab[1].size]
-        if not slabs:
-            return
-        c.ylo, c.yhi = propagated(slabs, c.ylo, c.yhi, CONTRACT_ROUNDS)
+        room = ~np.any(c.ylo > c.yhi, axis=1) & ~missed(slabs, c.ylo, c.yhi)
+        live = np.flatnonzero(room)
+        slabs = [(g if g.ndim == 2 else g[live], low[live], high[live]) for g, low, high in slabs]
+        lo, hi = c.ylo[live], c.yhi[live]
+        if self.sensors is not None:
+            planes = self.sensors.slabs(c.R[live], c.delta[live], box_middle(lo, hi) @ self.Q.T,
+                                        np.linalg.norm(0.5 * (hi - lo), axis=1), self.root)
+            if planes is not None:
+                planes = (on_axes(planes[0], self.Q), planes[1], planes[2])
+                hit = ~missed([planes], lo, hi)
+                room[live] = hit
+                live, lo, hi = live[hit], lo[hit], hi[hit]
+                slabs = [(g if g.ndim == 2 else g[hit], low[hit], high[hit]) for g, low, high in slabs + [planes]]
+        if slabs:
+            c.ylo[live], c.yhi[live] = propagated(slabs, lo, hi, CONTRACT_ROUNDS)
+        room[live] = ~np.any(c.ylo[live] > c.yhi[live], axis=1)
+        return room
 
     def closer(self, c):
         """Held cells modelled again about their model's ellipsoid, which holds every pose of theirs that may pass
@@ -1496,17 +1510,32 @@ def propagated(slabs, lo, hi, rounds):
     return lo, hi
 
 
+def _spanned(g, y_lo, y_hi):
+    """The range ``[bottom, top]`` (K, S) of each slab's g.y over each box (g as in :func:`propagated`), and g's
+    positive and negative parts."""
+    gp, gn = np.maximum(g, 0.0), np.minimum(g, 0.0)
+    if g.ndim == 2:
+        return y_lo @ gp.T + y_hi @ gn.T, y_hi @ gp.T + y_lo @ gn.T, gp, gn
+    return (np.einsum("ki,ksi->ks", y_lo, gp) + np.einsum("ki,ksi->ks", y_hi, gn),
+            np.einsum("ki,ksi->ks", y_hi, gp) + np.einsum("ki,ksi->ks", y_lo, gn), gp, gn)
+
+
+def missed(slabs, lo, hi):
+    """Whether some slab of ``slabs`` (as in :func:`propagated`) misses each box (K,): it holds no y."""
+    y_lo, y_hi = np.maximum(lo, -BIG_MM), np.minimum(hi, BIG_MM)
+    out = np.zeros(len(lo), bool)
+    for g, low, high in slabs:
+        bottom, top = _spanned(np.where(np.abs(g) <= 1e-12, 0.0, g), y_lo, y_hi)[:2]
+        out |= np.any((top < low) | (bottom > high), axis=1)
+    return out
+
+
 def _narrowed(g, low, high, y_lo, y_hi):
     """One round of :func:`propagated` over one list's slabs: each axis's interval (lo, hi) (K, 3) that they leave
     it. g.y's range over the box is ``[bottom, top]``; axis k's own part of it taken out, ``g_k y_k`` lies in
     ``[low - (top - own), high - (bottom - own)]``, divided by g_k (its ends swapped where g_k < 0; an axis a slab
     does not hold is left as it is)."""
-    gp, gn = np.maximum(g, 0.0), np.minimum(g, 0.0)
-    if g.ndim == 2:
-        top, bottom = y_hi @ gp.T + y_lo @ gn.T, y_lo @ gp.T + y_hi @ gn.T  # (K, S)
-    else:
-        top = np.einsum("ki,ksi->ks", y_hi, gp) + np.einsum("ki,ksi->ks", y_lo, gn)
-        bottom = np.einsum("ki,ksi->ks", y_lo, gp) + np.einsum("ki,ksi->ks", y_hi, gn)
+    bottom, top, gp, gn = _spanned(g, y_lo, y_hi)  # (K, S)
     # Every axis at once (K, S, 3).
     with np.errstate(divide="ignore", invalid="ignore"):
         a = (low[..., None] - top[..., None] + gp * y_hi[:, None] + gn * y_lo[:, None]) / g

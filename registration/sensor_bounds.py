@@ -134,6 +134,14 @@ class SensorBounds:
                 axial.setdefault(feature.id, (feature, []))[1].append(np.asarray(group.centre[k], float))
         self.axial = [(np.array(x), feature.point, feature.core()[2], feature.extent.interval[0] - admitted_mm,
                        feature.extent.interval[1] + admitted_mm) for feature, x in axial.values()]
+        # The same, all points at once (:meth:`located`): each point's x - c (N, 3), its feature's index, where each
+        # feature's points begin, each point's |x - c|, and each feature's axis (s, 3), p.d, t0 and t1 (s,).
+        counts = [len(x) for x, *_ in self.axial]
+        points = np.concatenate([x for x, *_ in self.axial] + [np.zeros((0, 3))]) - self.centroid
+        self.located_points = (points, np.repeat(np.arange(len(counts)), counts),
+                               np.cumsum([0] + counts[:-1]).astype(int), np.linalg.norm(points, axis=1))
+        self.located_axes = tuple(np.array(column, float) for column in
+                                  zip(*[(d, p @ d, t0, t1) for _, p, d, t0, t1 in self.axial])) if self.axial else ()
         self.printed = [EXACT] * len(touches) if printed is None else list(printed)
         # Where the sensors are placed (measurement frame): the points a region's extent follows besides the touches.
         self.markers = np.array([o for *_, o in self.touches]).reshape(-1, 3)
@@ -148,8 +156,9 @@ class SensorBounds:
         # no cell moves, :meth:`_crossing`).
         centre = np.array([o for *_, o in pairs], float).reshape(-1, 3)
         sp, sd = self.pair_lines[:2]
-        self.pair_foot = sp + dot(centre - sp, sd)[:, None] * sd
-        self.pair_off = np.linalg.norm(centre - self.pair_foot, axis=1)
+        self.pair_foot = dot(centre - sp, sd)  # along the line from sp
+        self.pair_off = np.linalg.norm(centre - sp - self.pair_foot[:, None] * sd, axis=1)
+        self.pair_foot_arm = np.linalg.norm(sp - self.centroid + self.pair_foot[:, None] * sd, axis=1)
         self.pair_rho = np.array([rho for *_, rho, _ in pairs], float)
         self.pair_fixture_c = np.array([ctype.fixture == "C" for ctype, *_ in pairs], bool)
         # Each row's touch: a plane on a plane has three rows, a plane and a line or a cylinder two, two lines one.
@@ -185,13 +194,12 @@ class SensorBounds:
         every pose of the cells (rotations within ``delta`` (K,) rad of R (K, 3, 3)) that the verdict admits:
         each located touch's axial parameter ``(x' - p).d``, ``x' = R^T (x - c) + y``, within its widened
         interval, and a turn within delta moves x' by at most ``delta |x - c|``."""
-        low, high = [], []
-        for x, p, d, t0, t1 in self.axial:
-            along = (x - self.centroid) @ R @ d - p @ d  # (K, n)
-            turn = delta[:, None] * np.linalg.norm(x - self.centroid, axis=1)
-            low.append(np.max(t0 - along - turn, axis=1))
-            high.append(np.min(t1 - along + turn, axis=1))
-        return np.stack(low, axis=1), np.stack(high, axis=1)
+        points, of, first, arm = self.located_points
+        d, pd, t0, t1 = self.located_axes
+        along = np.einsum("ni,kin->kn", points, (R @ d.T)[:, :, of]) - pd[of]  # (K, N)
+        turn = delta[:, None] * arm
+        return (np.maximum.reduceat(t0[of] - along - turn, first, axis=1),
+                np.minimum.reduceat(t1[of] - along + turn, first, axis=1))
 
     def _moved(self, x, R, yc):
         """Measurement-frame points (3,) or (K, 3) on the fixture at the cells' centres (K, 3)."""
@@ -218,11 +226,11 @@ class SensorBounds:
                 # Two lines' signed distance at R, u.(a + y - p*), is the true one's times u.u_R >= 1 - du^2/2, give
                 # or take the turn's move and |y - y_c| du across u (module doc); the true one's size is within
                 # the reach of rho.
-                least_sine, u, _, a, foot_f, du, arm, slack, dev, _ = self._crossing(R, delta, yc, h)
+                least_sine, u, _, a, du, arm, slack, dev, _ = self._crossing(R, delta, yc, h)
                 dl, hl = delta[:, None], h[:, None]
                 size = (self.pair_rho + limit * np.sqrt(slack) + dev + dl * arm + hl * du) / (1.0 - du**2 / 2.0)
                 g.append(u)
-                middle.append(-dot(u, a - foot_f))
+                middle.append(-dot(u, a - self.pair_lines[2]))  # (u is across the fixture's line)
                 reach.append(np.where(least_sine > 0.0, size, np.inf))
         if not g:
             return None
@@ -302,55 +310,59 @@ class SensorBounds:
     def _crossing(self, R, delta, yc, h):
         """The pairs of lines at the cells' centres (module doc), (K, s) each: the sine of their angle less delta
         (``low``), the common normal ``u`` (K, s, 3) signed to make the distance positive there, the distance D_c,
-        the sensor's closest point's image ``a`` (K, s, 3; y = 0) and its foot ``foot_f`` on the fixture's line,
-        how far u turns (``du``) and a turn moves ``a`` (``arm``, per rad), the whitening's ``slack`` and the
+        the sensor's closest point's image ``a`` (K, s, 3; y = 0), how far u turns (``du``) and a turn moves ``a`` (``arm``, per rad), the whitening's ``slack`` and the
         printed features' deviation bound ``dev`` and remainder ``dev_rest``."""
-        c = self.centroid
         sp, sd, fp, fd = self.pair_lines
         dl, hl = delta[:, None], h[:, None]
         d = sd @ R  # (K, s, 3): R^T d per pair
+        start = (sp - self.centroid) @ R  # the sensor's line's point's image, y = 0
         m = cross(d, fd[None])
         sine = np.sqrt(dot(m, m))
-        p = (sp - c) @ R + yc[:, None]
-        # The closest point on the sensor's line at the cells' centres, along d from p: t = f_w / (1 - cos^2).
-        w = fp[None] - p
+        # The closest point on the sensor's line at the cells' centres, along d from its point: t = f_w / (1 - cos^2),
+        # w from that point to the fixture's line's.
+        w = fp - yc[:, None] - start
         cosine = dot(d, fd)
         t = (dot(d, w) - cosine * dot(w, fd)) / sine**2
-        closest = sp[None] + t[..., None] * sd[None]  # measurement frame
-        signed = dot(p - fp, m) / sine
+        a = start + t[..., None] * d
+        signed = -dot(w, m) / sine
         distance = np.abs(signed)
         # How far the common normal turns over the cell: m moves by at most delta, its direction by asin(delta / s).
         du = np.where(dl < sine, 2.0 * np.sin(0.5 * np.arcsin(np.minimum(dl / sine, 1.0))), 2.0)
-        arm = np.sqrt(dot(closest - c, closest - c))
+        arm = np.sqrt(dot(a, a))
         # The placement centre's foot on the sensor's line, and that foot's distance from the fixture's line.
-        g = (self.pair_foot - c) @ R + yc[:, None] - fp
+        g = self.pair_foot[:, None] * d - w
         across = g - dot(g, fd)[..., None] * fd
-        apart = np.sqrt(dot(across, across)) + dl * np.linalg.norm(self.pair_foot - c, axis=1) + hl
+        apart = np.sqrt(dot(across, across)) + dl * self.pair_foot_arm + hl
         low = sine - dl
         lever = np.where(low > 0.0, apart * (1.0 + 1.0 / low**2) + self.pair_off, np.inf)
         slack = 1.0 + lever**2 / self.lever2
         u = np.where(signed < 0.0, -1.0, 1.0)[..., None] * m / sine[..., None]
-        a = (closest - c) @ R
-        foot_f = fp + dot(a + yc[:, None] - fp, fd)[..., None] * fd
         dev, dev_rest = np.zeros_like(low), np.zeros_like(low)
         printed = Printed.stacked([self.printed[k] for k in self.crossings])
         if printed.tilt.any() or printed.dev.any():
             # The row moves by -u.D(p*); p* moves by at most ``shift`` over the cell (module doc).
             shift = np.where(low > 0.0, (dl * arm + hl + distance * du) / low, np.inf)
-            dev = printed.at(foot_f, shift)
+            dev = printed.at(self._foot(a, yc), shift)
             dev_rest = du * dev + np.where(printed.tilt > 0.0, printed.tilt * shift, 0.0)
-        return low, u, distance, a, foot_f, du, arm, slack, dev, dev_rest
+        return low, u, distance, a, du, arm, slack, dev, dev_rest
+
+    def _foot(self, a, yc):
+        """The feet p* (K, s, 3) on the pairs' fixture lines of the sensors' closest points, ``a`` their images at
+        y = 0, at the cells' centres yc (K, 3)."""
+        fp, fd = self.pair_lines[2:]
+        return fp + dot(a + yc[:, None] - fp, fd)[..., None] * fd
 
     def _lines(self, R, delta, yc, h):
         """The pairs of lines (a line or a cylinder's axis at ``rho`` from another): their bounds' sum (K,) and
         their rows (K, s), as :meth:`cells` returns them."""
         kappa = (delta**2 / 2.0 + delta**3 / 6.0)[:, None]
         dl, hl, rho = delta[:, None], h[:, None], self.pair_rho
-        low, u, distance, a, foot_f, du, arm, slack, dev, dev_rest = self._crossing(R, delta, yc, h)
+        low, u, distance, a, du, arm, slack, dev, dev_rest = self._crossing(R, delta, yc, h)
         swing = dl * arm + hl + distance * du**2 / 2.0  # (x_a' - p*).u = D_c u_c.u + (x_a' - x_a'_c).u
         least = np.maximum(distance - swing - rho, rho - distance - swing) - dev
         # The distance (x_a' - p*).u along the common normal u: linear in (omega, y) but for u's turn and the
         # Rodrigues remainder.
+        foot_f = self._foot(a, yc)
         value = dot(a - foot_f, u) - rho
         remainder = distance * du**2 / 2.0 + (dl * arm + kappa * arm + hl) * du + kappa * arm + dev_rest
         twist = np.concatenate([cross(u, foot_f), -u], axis=2)
