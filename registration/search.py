@@ -669,8 +669,8 @@ class Tree:
         covariance. A sensor's stand-in takes its sensor's feature's modes, its deviation bound from
         :func:`.stand_ins.deviation_bound_mm`, and a radius mode moves its element by ``radius_move`` (fixture
         frame) or the turned ``radius_sensor`` (measurement frame), its size within ``radius_dev`` (mm). Each
-        bounded sensor touch (its group in ``sensors``) gets its feature's modes' twists and radius flags
-        (``sensor_twists``, ``sensor_radius``) and its :class:`.sensor_bounds.Printed` (``printed``)."""
+        bounded sensor touch (its group in ``sensors``) gets its feature's modes' twists and radius flags, times
+        L (``sensor_twists`` (s, 6, k'), ``sensor_radius`` (s, k')), and its :class:`.sensor_bounds.Printed` (``printed``)."""
         n = sum(g.count for g in groups)
         self.dev, self.tilt, self.L, self.printed = np.zeros(n), np.zeros(n), None, None
         if tolerance is None:
@@ -709,16 +709,17 @@ class Tree:
                 self.radius_dev[rows] = np.sqrt(q * max(radius @ s @ radius, 0.0)) * np.linalg.norm(link.sensor_move)
             self.tilt[rows] = _largest_turn(tolerance, f, q)
             first += g.count
-        self.sensor_twists = np.zeros((len(sensors), len(index), 6))
-        self.sensor_radius = np.zeros((len(sensors), len(index)))
+        twists, radius = np.zeros((len(sensors), len(index), 6)), np.zeros((len(sensors), len(index)))
         self.printed = []
         for k, g in enumerate(sensors):
             f, m = g.feature.id, tolerance.modes[g.feature.id]
             columns = slice(start[f], start[f] + len(m.names))
-            self.sensor_twists[k, columns] = m.twists
-            self.sensor_radius[k, columns] = m.radius
+            twists[k, columns] = m.twists
+            radius[k, columns] = m.radius
             self.printed.append(Printed(_largest_turn(tolerance, f, q),
                                         deviation_bound_mm(tolerance, g.feature, m.centre[None], q), m.centre))
+        # Through L at once: what a cell's rows need (the modes u, not the features' own).
+        self.sensor_twists, self.sensor_radius = np.einsum("sci,cj->sij", twists, self.L), radius @ self.L
 
     def printed_centre(self, idx):
         """The shells a printed sphere's centre lies in, touched by ``idx`` (four or more touches on it, point or
@@ -1079,9 +1080,9 @@ class Tree:
                 # A sensor's row moves with its feature's modes as the row's twist and radius say (its remainder
                 # in the sensor's own).
                 rows = self.sensors.row_touch
-                change = np.einsum("ksi,sci->ksc", c.s_twist, self.sensor_twists[rows]) \
+                change = (c.s_twist.transpose(1, 0, 2) @ self.sensor_twists[rows]).transpose(1, 0, 2) \
                     + c.s_radius[..., None] * self.sensor_radius[rows][None]
-                Jz = np.concatenate([Jz, change @ self.L], axis=1)
+                Jz = np.concatenate([Jz, change], axis=1)
             # u eliminated exactly: min over u of |v - Jz u|^2 + sigma^2 |u|^2 (:func:`_modes_eliminated`), the
             # model's least and its ellipsoid's shadow on (omega, y) as with u among the unknowns.
             gram = gram - _modes_eliminated(Jz, self.problem.sigma, columns)
@@ -1664,11 +1665,17 @@ def split(v, w, ylo, yhi, turning, relevant):
 def _modes_eliminated(Jz, sigma, columns):
     """What eliminating the modes u takes off the Gram matrix of the rows' ``columns`` (K, r, c): ``B^T C^-1 B``
     (K, c, c), ``B = Jz^T columns``, ``C = sigma^2 I + Jz^T Jz`` (Jz (K, r, k)), so that a combination v of the
-    columns costs ``|v|^2 - v^T Jz C^-1 Jz^T v = min over u of |v - Jz u|^2 + sigma^2 |u|^2``. A k by k system:
-    a part's few modes, not the many rows (C positive definite, its least eigenvalue sigma^2)."""
+    columns costs ``|v|^2 - v^T Jz C^-1 Jz^T v = min over u of |v - Jz u|^2 + sigma^2 |u|^2``. The smaller of two
+    equal systems (C positive definite, its least eigenvalue sigma^2): k by k, a part's few modes under many rows,
+    or r by r, ``Jz C^-1 Jz^T = (sigma^2 I + G)^-1 G``, ``G = Jz Jz^T`` (push-through), a few sensors' rows on
+    many features' modes."""
+    r, k = Jz.shape[1:]
     Jt = Jz.transpose(0, 2, 1)
+    if r < k:
+        G = Jz @ Jt
+        return columns.transpose(0, 2, 1) @ np.linalg.solve(sigma**2 * np.eye(r) + G, G) @ columns
     B = Jt @ columns
-    return B.transpose(0, 2, 1) @ np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(Jz.shape[2]), B)
+    return B.transpose(0, 2, 1) @ np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(k), B)
 
 
 def _reduced(gram, H_pinv):

@@ -204,8 +204,7 @@ def test_the_sensor_bounds_hold_on_a_printed_part(name, lever_mm):
         R0 = rotation_from_vector(v0[None])
         bound, value, Jw, m, remainder, _, twist, radius = tree.sensors.cells(
             R0, np.array([np.sqrt(3) * w]), centre[None], np.array([np.linalg.norm(half)]))
-        Jz = (np.einsum("si,sci->sc", twist[0], tree.sensor_twists[rows])
-              + radius[0][:, None] * tree.sensor_radius[rows]) @ tree.L
+        Jz = np.einsum("si,sij->sj", twist[0], tree.sensor_twists[rows]) + radius[0][:, None] * tree.sensor_radius[rows]
         Rs, y = _samples(rng, v0, w, centre, half, 32)
         # Deviations along one row's largest change (that row moved as far as the modes allow), or at random.
         along = Jz[rng.integers(len(Jz), size=len(Rs))]
@@ -259,8 +258,7 @@ def test_the_printed_sensor_bound_takes_off_what_the_part_can_move_a_row(name):
         pose = (R[None], np.zeros(1), (R.T @ (tree.centroid - t))[None], np.zeros(1))
         twist, radius = tree.sensors.cells(*pose)[6:]
         rows = tree.sensors.row_touch
-        Jz = (np.einsum("si,sci->sc", twist[0], tree.sensor_twists[rows])
-              + radius[0][:, None] * tree.sensor_radius[rows]) @ tree.L
+        Jz = np.einsum("si,sij->sj", twist[0], tree.sensor_twists[rows]) + radius[0][:, None] * tree.sensor_radius[rows]
         q = tree.root**2 / tree.problem.sigma**2
         fids = {tree.full.groups[len(tree.problem.groups) + g].feature.id for g in np.unique(rows)}
         for j in np.flatnonzero(np.linalg.norm(Jz, axis=1) > 1e-9 * max(np.abs(Jz).max(), 1e-300)):
