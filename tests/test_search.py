@@ -18,9 +18,10 @@ from fixturecad.registration.least_squares import levenberg_marquardt
 from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, across_rows, first_turns, largest_swing,
-                                            measured_normal, normal_cones, normal_signs, propagated, rotation_boxes,
-                                            row_span, search, shell_box, stand_in_tree, threshold_mm2, tube_pairs)
+from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, _modes_eliminated, across_rows,
+                                            first_turns, largest_swing, measured_normal, normal_cones, normal_signs,
+                                            propagated, rotation_boxes, row_span, search, shell_box, stand_in_tree,
+                                            threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -1050,3 +1051,22 @@ def test_a_round_touchs_turning_deviation_bounds_its_features_move(name, counts)
         assert np.all(moved <= tree.turn_dev[i] * (1.0 + 1e-9))
         worst = max(worst, float(moved.max() / tree.turn_dev[i]))
     assert worst > 0.5  # the places and modes reach near the bound
+
+
+@pytest.mark.parametrize("rows, modes", [(6, 30), (30, 6), (5, 5)])
+def test_eliminating_the_modes_leaves_each_combination_its_least_cost_over_them(rows, modes):
+    """Either system :func:`_modes_eliminated` solves (k by k under many rows, r by r for a few sensors' rows on
+    many modes) leaves v^T (G - E) v the least over u of ``|Jz u - v|^2 + sigma^2 |u|^2``, found here by least
+    squares on the stacked system, for random combinations v of the columns; one mode almost unseen."""
+    rng = np.random.default_rng(rows)
+    Jz = rng.normal(size=(3, rows, modes))
+    Jz[:, :, 0] *= 1e-6
+    columns, sigma = rng.normal(size=(3, rows, 7)), 0.005
+    eliminated = _modes_eliminated(Jz, sigma, columns)
+    for k in range(3):
+        for x in rng.normal(size=(4, 7)):
+            v = columns[k] @ x
+            u = np.linalg.lstsq(np.vstack([Jz[k], sigma * np.eye(modes)]), np.concatenate([v, np.zeros(modes)]),
+                                rcond=None)[0]
+            least = np.sum((Jz[k] @ u - v) ** 2) + sigma**2 * u @ u
+            assert x @ (columns[k].T @ columns[k] - eliminated[k]) @ x == pytest.approx(least, rel=1e-6, abs=1e-12)
