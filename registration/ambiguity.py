@@ -8,8 +8,9 @@ import numpy as np
 
 from .least_squares import levenberg_marquardt, levenberg_marquardt_batch
 from .patches import patch_points
+from .pose import check_fixture2meas
 from .problem import Problem
-from .solve import solve
+from .solve import Solutions, judged_all, local_starts
 from .touches import point_touches
 from .verdict import Solution, chi_square_passes, judged, same_as_any
 
@@ -42,7 +43,7 @@ def explanations(problem, features, solutions, initial_pose=None, told=()):
     touches = list(dict.fromkeys(int(k) for k in problem.row_touch))
     left_out = _left_out_fits(problem, touches, starts)
     if not any(left_out.values()):
-        left_out = {touch: _fits(problem.without(touch), initial_pose) for touch in touches}
+        left_out = _fits_afresh(problem, touches, initial_pose)
     found = []
     for touch, fits in left_out.items():
         tries = [(None, fits)]
@@ -58,10 +59,29 @@ def explanations(problem, features, solutions, initial_pose=None, told=()):
     return found
 
 
-def _fits(problem, initial_pose):
-    """Every admissible rank-6 pose passing the residual test, solved from scratch."""
-    # The closed-form starts only: a complete search for every touch left out costs seconds.
-    return list(solve(problem, initial_pose, complete=False, good_only=True))
+def _fits_afresh(problem, touches, initial_pose):
+    """Every admissible rank-6 pose passing the residual test of the problem without each of ``touches``, solved
+    from scratch as :func:`.solve.solve` does without its complete search (which would cost seconds for every
+    touch left out): from the closed-form starts, or from ``initial_pose`` alone when given; every touch's starts
+    refined at once. {touch: fits}."""
+    reduced = {touch: problem.without(touch) for touch in touches}
+    if initial_pose is not None:
+        T = check_fixture2meas(initial_pose)
+        starts = {touch: [(T[:3, :3], T[:3, 3])] for touch in touches}
+    else:
+        starts = {touch: local_starts(reduced[touch]) for touch in touches}
+    left = np.concatenate([np.full(len(starts[touch]), touch, int) for touch in touches])
+    if not len(left):
+        return {touch: [] for touch in touches}
+    Rs, ts, costs = levenberg_marquardt_batch(problem, np.array([R for touch in touches for R, _ in starts[touch]]),
+                                              np.array([t for touch in touches for _, t in starts[touch]]), left)
+    fits, first = {}, 0
+    for touch in touches:
+        k = range(first, first + len(starts[touch]))
+        refined = [(Rs[i], ts[i], None, None, float(costs[i])) for i in k]
+        fits[touch] = list(judged_all(reduced[touch], Solutions(), starts[touch], refined, good_only=True))
+        first = k.stop
+    return fits
 
 
 def _robust_pose(problem, R, t, iterations=5):

@@ -62,20 +62,33 @@ def solve(problem, initial_pose=None, complete=True, found=None, good_only=False
     if initial_pose is None and weak is None and not (solutions.complete and starts):
         # The closed-form starts: where the search did not complete, or found that no pose passes (then the
         # best fits, for what the verdict says of them).
-        starts = starts + best_starts(problem, initial_poses(problem))[0][:LOCAL_STARTS]
-    length = problem.scale()
-    reach = []
-    # The touches a region's extent follows, point and ball touches: one of them off its patch by more than the
-    # region reaches shows that no pose of it is admissible. (Only where there are regions: not on a nominal pose.)
-    followed = problem.point_touches() if extents else None
+        starts = starts + local_starts(problem)
     # Every start refined, at once where there are several (one alone is refined on its own: cheaper, and it gives
-    # its rows), then taken in order: a pose refined already is one solution.
+    # its rows).
     if len(starts) < 2:
         refined = [(R2, t2, r, J, float(r @ r))
                    for R2, t2, r, J in (levenberg_marquardt(problem, R, t) for R, t in starts)]
     else:
         refined = [(R2, t2, None, None, cost)
                    for R2, t2, cost in zip(*levenberg_marquardt_batch(problem, *map(np.array, zip(*starts))))]
+    return judged_all(problem, solutions, starts, refined, extents, found, good_only)
+
+
+def local_starts(problem):
+    """The closed-form starts (:mod:`.starts`) refined when there is no complete search: (R, t) pairs."""
+    return best_starts(problem, initial_poses(problem))[0][:LOCAL_STARTS]
+
+
+def judged_all(problem, solutions, starts, refined, extents=(), found=None, good_only=False):
+    """:func:`solve`'s answer from its ``starts`` and their refinements ``refined`` ((R, t, rows or None,
+    Jacobian or None, cost) each), taken in order (a pose refined already is one solution), added to
+    ``solutions`` (:class:`Solutions`); ``extents`` (mm): the first starts' regions' of the complete search
+    ``found``."""
+    length = problem.scale()
+    reach = []
+    # The touches a region's extent follows, point and ball touches: one of them off its patch by more than the
+    # region reaches shows that no pose of it is admissible. (Only where there are regions: not on a nominal pose.)
+    followed = problem.point_touches() if extents else None
     for k, ((R, t), (R2, t2, r, J, cost)) in enumerate(zip(starts, refined)):
         if good_only and not chi_square_passes(cost, problem.size, 6, problem.sigma):
             continue  # (it fails the test at rank 6: not good at any rank)

@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from fixturecad.registration.ambiguity import _fits_afresh
 from fixturecad.registration.engine import register_touches
 from fixturecad.registration.least_squares import levenberg_marquardt
 from fixturecad.registration.pose import fixture2meas_from_rt, pose_errors, random_rotation
 from fixturecad.registration.problem import Problem
+from fixturecad.registration.solve import solve
 from fixturecad.registration.synthetic import plan_touches
 from fixturecad.registration.touchfile import format_result, report
 from fixturecad.registration.touches import build_groups
@@ -128,3 +130,23 @@ def test_a_pose_the_search_misses_but_an_explanation_finds_is_the_answer(index):
     assert result["status"] == "unique" and result["flagged"] == []
     assert distances(features, touches, result["pose"]).max() < 5 * SIGMA_MM
     assert max(pose_errors(np.array(result["pose"]), truth)) < 0.05
+
+
+def test_every_touch_left_out_is_fitted_afresh_as_its_own_solve_would():
+    """The explanations' fits from scratch, every touch left out and all their closed-form starts refined in one
+    batch, are what :func:`.solve.solve` gives each touch set alone without its complete search: as many poses,
+    the same ones, in the same order; the spoiled touch's among those that fit."""
+    rng = np.random.default_rng(4)
+    features, touches, truth = cube_touches(rng, {"top": 3, "front": 3, "left": 3})
+    bad = spoil(features, touches, truth, "top", 0)
+    problem = Problem(build_groups(features, touches), SIGMA_MM)
+    touched = list(dict.fromkeys(int(k) for k in problem.row_touch))
+    batched = _fits_afresh(problem, touched, None)
+    for touch in touched:
+        alone = solve(problem.without(touch), None, complete=False, good_only=True)
+        assert len(batched[touch]) == len(alone), touch
+        for a, b in zip(batched[touch], alone):
+            assert np.allclose(a.rotation, b.rotation, atol=1e-9) and np.allclose(a.translation, b.translation,
+                                                                                  atol=1e-6)
+    assert batched[bad]
+    assert pose_errors(batched[bad][0].fixture2meas, truth)[0] < 0.05
