@@ -138,7 +138,7 @@ def test_every_touch_left_out_is_fitted_afresh_as_its_own_solve_would():
     the same ones, in the same order; the spoiled touch's among those that fit."""
     rng = np.random.default_rng(4)
     features, touches, truth = cube_touches(rng, {"top": 3, "front": 3, "left": 3})
-    bad = spoil(features, touches, truth, "top", 0)
+    bad = spoil(features, touches, truth, "left", 2)
     problem = Problem(build_groups(features, touches), SIGMA_MM)
     touched = list(dict.fromkeys(int(k) for k in problem.row_touch))
     batched = _fits_afresh(problem, touched, None)
