@@ -19,9 +19,9 @@ from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, _modes_eliminated, across_rows,
-                                            first_turns, largest_swing, measured_normal, normal_cones, normal_signs,
-                                            propagated, rotation_boxes, row_span, search, shell_box, stand_in_tree,
-                                            threshold_mm2, tube_pairs)
+                                            first_turns, largest_swing, measured_normal, missed, normal_cones,
+                                            normal_signs, propagated, rotation_boxes, row_span, search, shell_box,
+                                            stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
 from fixturecad.registration.touches import build_groups
 from fixturecad.templates import make
@@ -813,6 +813,27 @@ def test_slabs_narrow_a_box_as_a_linear_program_does(shared):
                     else:
                         want_hi[axis] = min(want_hi[axis], out.x[axis])
         assert np.allclose(got_lo[k], want_lo, atol=1e-7) and np.allclose(got_hi[k], want_hi, atol=1e-7), k
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_a_box_a_slab_misses_is_one_no_linear_program_finds_a_point_in(shared):
+    """:func:`missed` says a box holds no y exactly where some slab alone leaves it none: scipy's linear program,
+    slab by slab, on 200 boxes and 4 slabs each (about half of them placed off the box, one direction 0 on an
+    axis), the slabs' g the boxes' own or the same for all."""
+    rng = np.random.default_rng(6)
+    K, S = 200, 4
+    g = rng.normal(size=(S, 3)) if shared else rng.normal(size=(K, S, 3))
+    g[..., 1, 2] = 0.0
+    lo = rng.uniform(-5, 0, (K, 3))
+    hi = lo + rng.uniform(0.5, 6, (K, 3))
+    every = np.broadcast_to(g, (K, S, 3))
+    at = np.einsum("ksi,ki->ks", every, rng.uniform(lo, hi)) + rng.choice([0.0, 1.0], (K, S)) * rng.normal(0, 8, (K, S))
+    low, high = at - rng.uniform(0.1, 1, (K, S)), at + rng.uniform(0.1, 1, (K, S))
+    empty = [any(linprog(np.zeros(3), A_ub=np.array([every[k, s], -every[k, s]]), b_ub=[high[k, s], -low[k, s]],
+                         bounds=list(zip(lo[k], hi[k])), method="highs").status == 2 for s in range(S))
+             for k in range(K)]
+    assert 40 <= sum(empty) <= 160
+    assert missed([(g, low, high)], lo, hi).tolist() == empty
 
 
 def test_leaves_are_joined_as_a_graph_library_joins_them():
