@@ -999,8 +999,11 @@ class Tree:
 
     def turn_reach(self, c):
         """How far (K,) rad from ``R0 exp(omega*)`` the turn of any pose of the cells that may pass lies: the
-        shadow of the model's ellipsoid on omega, ``sqrt(slack lambda_max(W_ww))`` (held cells only)."""
-        return np.sqrt(c.slack * np.linalg.eigvalsh(c.W[:, :3, :3])[:, -1])
+        shadow of the model's ellipsoid on omega, ``sqrt(slack lambda_max(W_ww))`` (held cells only; inf on the
+        others). W's omega block is the inverse of the y-reduced form A (block inversion; where the model holds every
+        motion, the y block's pseudo-inverse is its inverse), whose least eigenvalue ``alpha`` the model has."""
+        with np.errstate(divide="ignore"):
+            return np.where(c.held, np.sqrt(c.slack / c.alpha[:, 0]), np.inf)
 
     def narrowed(self, c):
         """Which cells' rotation boxes narrow to their model's ellipsoid, and the narrower boxes (v, w).
@@ -1325,10 +1328,18 @@ class Tree:
         G, g = c.gram[:, 1:, 1:], c.gram[:, 1:, 0]
         eig = np.linalg.eigvalsh(G)
         held = eig[:, 0] > 1e-9 * np.maximum(eig[:, -1], 1e-300)
-        W = np.linalg.inv(np.where(held[:, None, None], G, np.eye(G.shape[1])))
+        inverse = np.where(c.alpha > 1e-12 * np.maximum(c.alpha[:, -1:], 1e-300), 1.0 / np.maximum(c.alpha, 1e-300), 0.0)
+        # W = G^-1 by blocks (where the model holds every motion, the y block's pseudo-inverse H is its inverse, and
+        # A, the y-reduced form, the omega block's Schur complement): W_ww = A^-1, W_wy = -A^-1 G_wy H, W_yy = H -
+        # H G_yw W_wy; the identity on the other cells.
+        Ww = (c.V * inverse[:, None]) @ c.V.transpose(0, 2, 1)
+        Wwy = -Ww @ G[:, :3, 3:] @ c.H_pinv
+        Wyy = c.H_pinv - c.H_pinv @ G[:, 3:, :3] @ Wwy
+        W = np.where(held[:, None, None], np.concatenate([np.concatenate([Ww, Wwy], axis=2),
+                                                          np.concatenate([Wwy.transpose(0, 2, 1), Wyy], axis=2)],
+                                                         axis=1), np.eye(6))
         theta = -np.einsum("kij,kj->ki", W, g)
         beta = np.einsum("kij,ki->kj", c.V, c.b)
-        inverse = np.where(c.alpha > 1e-12 * np.maximum(c.alpha[:, -1:], 1e-300), 1.0 / np.maximum(c.alpha, 1e-300), 0.0)
         q_min = c.Q0 - np.sum(inverse * beta**2, axis=1)
         slack = np.maximum((self.root + c.remainder) ** 2 - q_min, 0.0)
         return W, theta, slack, held
