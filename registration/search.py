@@ -670,7 +670,8 @@ class Tree:
         :func:`.stand_ins.deviation_bound_mm`, and a radius mode moves its element by ``radius_move`` (fixture
         frame) or the turned ``radius_sensor`` (measurement frame), its size within ``radius_dev`` (mm). Each
         bounded sensor touch (its group in ``sensors``) gets its feature's modes' twists and radius flags, times
-        L (``sensor_twists`` (s, 6, k'), ``sensor_radius`` (s, k')), and its :class:`.sensor_bounds.Printed` (``printed``)."""
+        L (``sensor_twists`` (s, 6, k'), ``sensor_radius`` (s, k')), and its :class:`.sensor_bounds.Printed`
+        (``printed``)."""
         n = sum(g.count for g in groups)
         self.dev, self.tilt, self.L, self.printed = np.zeros(n), np.zeros(n), None, None
         if tolerance is None:

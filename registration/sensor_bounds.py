@@ -152,11 +152,12 @@ class SensorBounds:
         pairs = [self.touches[k] for k in self.crossings]
         self.pair_lines = tuple(np.array([pair[side][key] for pair in pairs], float).reshape(-1, 3)
                                 for side, key in ((1, "p"), (1, "d"), (2, "p"), (2, "d")))
-        # Each placement centre's foot on its sensor's line and how far off it the centre lies (the lever's parts that
-        # no cell moves, :meth:`_crossing`).
+        # Each placement centre's foot on its sensor's line (how far along it from its point), how far off it the
+        # centre lies, and how far the foot lies from the centroid (the lever's parts that no cell moves,
+        # :meth:`_crossing`).
         centre = np.array([o for *_, o in pairs], float).reshape(-1, 3)
         sp, sd = self.pair_lines[:2]
-        self.pair_foot = dot(centre - sp, sd)  # along the line from sp
+        self.pair_foot = dot(centre - sp, sd)
         self.pair_off = np.linalg.norm(centre - sp - self.pair_foot[:, None] * sd, axis=1)
         self.pair_foot_arm = np.linalg.norm(sp - self.centroid + self.pair_foot[:, None] * sd, axis=1)
         self.pair_rho = np.array([rho for *_, rho, _ in pairs], float)
@@ -310,8 +311,9 @@ class SensorBounds:
     def _crossing(self, R, delta, yc, h):
         """The pairs of lines at the cells' centres (module doc), (K, s) each: the sine of their angle less delta
         (``low``), the common normal ``u`` (K, s, 3) signed to make the distance positive there, the distance D_c,
-        the sensor's closest point's image ``a`` (K, s, 3; y = 0), how far u turns (``du``) and a turn moves ``a`` (``arm``, per rad), the whitening's ``slack`` and the
-        printed features' deviation bound ``dev`` and remainder ``dev_rest``."""
+        the sensor's closest point's image ``a`` (K, s, 3; y = 0), how far u turns (``du``) and a turn moves ``a``
+        (``arm``, per rad), the whitening's ``slack`` and the printed features' deviation bound ``dev`` and remainder
+        ``dev_rest``."""
         sp, sd, fp, fd = self.pair_lines
         dl, hl = delta[:, None], h[:, None]
         d = sd @ R  # (K, s, 3): R^T d per pair
