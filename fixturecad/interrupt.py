@@ -15,6 +15,8 @@ from pathlib import Path
 MESSAGE = b"fixturecad: interrupted; nothing was written\n"
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _PENDING = []  # temporary files and folders an interrupt removes
+_HOLDING = []  # open :func:`held` blocks: an interrupt in one waits for the last to end
+_WAITING = []  # the signal that waited
 
 
 def install() -> dict:
@@ -38,7 +40,23 @@ def removing(path: Path):
             signal.signal(signum, handler)
 
 
+@contextmanager
+def held():
+    """In the block, an interrupt waits until the block ends: a temporary path made and given to :func:`removing`
+    in one such block is never left behind (an interrupt between the two would leave it)."""
+    _HOLDING.append(None)
+    try:
+        yield
+    finally:
+        _HOLDING.pop()
+        if _WAITING and not _HOLDING:
+            _stop(_WAITING[0], None)
+
+
 def _stop(signum, frame):
+    if _HOLDING:
+        _WAITING.append(signum)
+        return
     for path in _PENDING:
         shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
     os.write(2, MESSAGE)

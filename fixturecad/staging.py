@@ -21,11 +21,11 @@ import json
 import os
 import shutil
 import tempfile
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 from fixturecad.errors import InputError, write_error
-from fixturecad.interrupt import removing
+from fixturecad.interrupt import held, removing
 
 FEATURES_SCHEMA_PREFIX = "fixturecad.features/"  # any version: a folder from an older fixturecad is still ours
 MANIFEST = "fixturecad-files.json"  # {"files": [...]}: the files fixturecad wrote in a folder, relative paths
@@ -98,26 +98,29 @@ def staged_folder(target: Path, force: bool = False, kind: str = "drawing", inpu
     See :func:`check_target` for ``kind`` and ``inputs``.
     """
     target = check_target(target, force, kind, inputs)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        _remove_stale(target.parent, target.name)
-        staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent))
-    except OSError as error:
-        raise write_error(error, f"in {target.parent}") from None
-    staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
-    try:
-        with removing(staging):
+    with ExitStack() as stack:
+        with held():  # made and registered for removal as one step
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                _remove_stale(target.parent, target.name)
+                staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp",
+                                                dir=target.parent))
+            except OSError as error:
+                raise write_error(error, f"in {target.parent}") from None
+            stack.enter_context(removing(staging))
+        staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
+        try:
             yield staging
             _write_manifest(staging)
             if target.exists():
                 _keep_theirs(target, staging)
             _move_into_place(staging, target)
-    except OSError as error:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise write_error(error, target) from None
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
+        except OSError as error:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise write_error(error, target) from None
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
 
 
 def check_files(folder: Path, names, force: bool) -> Path:
@@ -146,21 +149,23 @@ def staged_files(folder: Path, names):
     folder."""
     folder = Path(folder)
     parent = _nearest_existing(folder)
-    try:
-        _remove_stale(parent, folder.name)
-        staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
-    except OSError as error:
-        raise write_error(error, f"in {parent}") from None
-    try:
-        with removing(staging):
+    with ExitStack() as stack:
+        with held():  # made and registered for removal as one step
+            try:
+                _remove_stale(parent, folder.name)
+                staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
+            except OSError as error:
+                raise write_error(error, f"in {parent}") from None
+            stack.enter_context(removing(staging))
+        try:
             yield staging
             folder.mkdir(parents=True, exist_ok=True)
             for name in names:
                 os.replace(staging / name, folder / name)
-    except OSError as error:
-        raise write_error(error, folder) from None
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        except OSError as error:
+            raise write_error(error, folder) from None
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
 
 
 def _nearest_existing(path: Path) -> Path:

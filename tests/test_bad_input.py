@@ -107,6 +107,23 @@ def test_an_interrupted_build_leaves_nothing_and_says_so(tmp_path, signum):
     assert list(tmp_path.iterdir()) == []  # its own temporary folder and the stale one are gone
 
 
+def test_an_interrupt_between_making_a_temporary_folder_and_registering_it_waits_and_removes_it(tmp_path):
+    """The race an interrupted build once lost under load (its temporary folder left behind): the signal comes
+    after the folder is made and before it is registered for removal; held, it waits, and the folder goes."""
+    script = ("import os, signal, sys; from contextlib import ExitStack; from pathlib import Path; "
+              "from fixturecad import interrupt; interrupt.install(); path = Path(sys.argv[1])\n"
+              "with ExitStack() as stack:\n"
+              "    with interrupt.held():\n"
+              "        path.mkdir(); os.kill(os.getpid(), signal.SIGTERM)\n"
+              "        stack.enter_context(interrupt.removing(path))\n"
+              "    print('not reached')\n")
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path / "staging")], capture_output=True, text=True,
+                          timeout=60)
+    assert (done.returncode, done.stdout, done.stderr) == (128 + signal.SIGTERM, "",
+                                                           "fixturecad: interrupted; nothing was written\n")
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("content", ["", "garbage(\n", "x = 1\n"])
 def test_a_damaged_register_py(cube, content):
     (cube / "register.py").write_text(content)
