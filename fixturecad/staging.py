@@ -99,15 +99,7 @@ def staged_folder(target: Path, force: bool = False, kind: str = "drawing", inpu
     """
     target = check_target(target, force, kind, inputs)
     with ExitStack() as stack:
-        with held():  # made and registered for removal as one step
-            try:
-                target.parent.mkdir(parents=True, exist_ok=True)
-                _remove_stale(target.parent, target.name)
-                staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp",
-                                                dir=target.parent))
-            except OSError as error:
-                raise write_error(error, f"in {target.parent}") from None
-            stack.enter_context(removing(staging))
+        staging = _staging(stack, target.parent, target.name)
         staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private; the result is an ordinary folder
         try:
             yield staging
@@ -150,13 +142,7 @@ def staged_files(folder: Path, names):
     folder = Path(folder)
     parent = _nearest_existing(folder)
     with ExitStack() as stack:
-        with held():  # made and registered for removal as one step
-            try:
-                _remove_stale(parent, folder.name)
-                staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
-            except OSError as error:
-                raise write_error(error, f"in {parent}") from None
-            stack.enter_context(removing(staging))
+        staging = _staging(stack, parent, folder.name)
         try:
             yield staging
             folder.mkdir(parents=True, exist_ok=True)
@@ -166,6 +152,21 @@ def staged_files(folder: Path, names):
             raise write_error(error, folder) from None
         finally:
             shutil.rmtree(staging, ignore_errors=True)
+
+
+def _staging(stack: ExitStack, parent: Path, name: str) -> Path:
+    """A new temporary folder ``.<name>.<pid>.*.tmp`` in ``parent`` (made if missing), the stale ones of processes
+    that no longer run cleared first; made and registered for removal on an interrupt as one step (an interrupt
+    between the two would leave it), the registration held by ``stack``."""
+    with held():
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+            _remove_stale(parent, name)
+            staging = Path(tempfile.mkdtemp(prefix=f".{name}.{os.getpid()}.", suffix=".tmp", dir=parent))
+        except OSError as error:
+            raise write_error(error, f"in {parent}") from None
+        stack.enter_context(removing(staging))
+    return staging
 
 
 def _nearest_existing(path: Path) -> Path:
