@@ -228,8 +228,11 @@ def _keep_theirs(target: Path, staging: Path) -> None:
 def _move_into_place(staging: Path, target: Path) -> None:
     if target.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".old", dir=target.parent))
-        os.replace(target, old / target.name)
-        os.replace(staging, target)
+        # An interrupt between the two renames would leave no target and the old one (with the user's own files)
+        # in a folder the next command clears as stale: it waits until the new one is in place.
+        with held():
+            os.replace(target, old / target.name)
+            os.replace(staging, target)
         shutil.rmtree(old, ignore_errors=True)
     else:
         os.replace(staging, target)

@@ -124,6 +124,26 @@ def test_an_interrupt_between_making_a_temporary_folder_and_registering_it_waits
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_interrupt_between_the_two_renames_of_a_replaced_folder_waits_for_the_new_one(tmp_path):
+    """A folder replaced (--force) is renamed aside, then the new one into place: a signal after the first rename
+    waits until the second is done, so the target is never missing (the old one aside would be cleared as stale by
+    the next command, the user's own files with it)."""
+    script = ("import os, signal, sys; from pathlib import Path; from fixturecad import interrupt, staging\n"
+              "interrupt.install(); root = Path(sys.argv[1]); target, new = root / 'cube', root / 'new'\n"
+              "target.mkdir(); (target / 'old.txt').write_text('old')\n"
+              "new.mkdir(); (new / 'new.txt').write_text('new')\n"
+              "rename = os.replace\n"
+              "def replace(a, b):\n"
+              "    rename(a, b)\n"
+              "    os.kill(os.getpid(), signal.SIGTERM)\n"
+              "os.replace = replace\n"
+              "staging._move_into_place(new, target)\n"
+              "print('not reached')\n")
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout) == (128 + signal.SIGTERM, "")
+    assert (tmp_path / "cube" / "new.txt").read_text() == "new"
+
+
 @pytest.mark.parametrize("content", ["", "garbage(\n", "x = 1\n"])
 def test_a_damaged_register_py(cube, content):
     (cube / "register.py").write_text(content)
