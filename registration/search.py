@@ -795,7 +795,7 @@ class Tree:
         inf where not usable). The distance ``|s|`` is convex in the touch's place: above its tangent at s_0, by
         at most the bend ``|D|^2 / (2 (|s_0| - |D|))``; the model takes half the bend, and is off by the other
         half either way, and by kappa."""
-        centre = self.box_centre(c)
+        centre = self.box_centre(c.ylo, c.yhi)
         half = 0.5 * (c.yhi - c.ylo)
         half = np.where(self.aligned[None, self.round], np.linalg.norm(half[:, :2], axis=1)[:, None],
                         np.linalg.norm(half, axis=1)[:, None])
@@ -895,7 +895,7 @@ class Tree:
     def sensor_rows(self, c):
         """The bounded sensors' cost bound over the cells (K,); their first-order rows (``SENSOR_ROWS``) filled in
         (:meth:`.sensor_bounds.SensorBounds.cells`)."""
-        sensed, *rows = self.sensors.cells(c.R, c.delta, self.box_centre(c),
+        sensed, *rows = self.sensors.cells(c.R, c.delta, self.box_centre(c.ylo, c.yhi),
                                            np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1))
         for name, x in zip(SENSOR_ROWS, rows):
             setattr(c, name, x)
@@ -969,7 +969,7 @@ class Tree:
         slabs = [(g if g.ndim == 2 else g[live], low[live], high[live]) for g, low, high in slabs]
         lo, hi = c.ylo[live], c.yhi[live]
         if self.sensors is not None:
-            planes = self.sensors.slabs(c.R[live], c.delta[live], box_middle(lo, hi) @ self.Q.T,
+            planes = self.sensors.slabs(c.R[live], c.delta[live], self.box_centre(lo, hi),
                                         np.linalg.norm(0.5 * (hi - lo), axis=1), self.root)
             if planes is not None:
                 planes = (on_axes(planes[0], self.Q), planes[1], planes[2])
@@ -1069,7 +1069,7 @@ class Tree:
             # centre, off by at most the touch's move times its feature's largest turn (and, on a round
             # feature, by its direction's turn times its deviation bound).
             touch = np.concatenate([self.row_touch, np.flatnonzero(self.round)])
-            centre = self.box_centre(c)
+            centre = self.box_centre(c.ylo, c.yhi)
             spread = np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1)[:, None]
             move_all = c.delta[:, None] * self.rho[None] + kappa + spread
             off_dev = move_all[:, touch] * self.tilt[touch]
@@ -1120,9 +1120,9 @@ class Tree:
         terms = np.where((shifted <= 0.0) & (beta2 > 1e-30), np.inf, terms)
         c.least = np.maximum(c.Q0 - np.sum(terms, axis=1) - lam * c.delta**2, 0.0)
 
-    def box_centre(self, c):
-        """The centres (K, 3) of the cells' y boxes, fixture frame (0 along an unbounded axis)."""
-        return box_middle(c.ylo, c.yhi) @ self.Q.T
+    def box_centre(self, ylo, yhi):
+        """The centres (K, 3) of y boxes (box axes), fixture frame (0 along an unbounded axis)."""
+        return box_middle(ylo, yhi) @ self.Q.T
 
     def round_least(self, a, ylo, yhi):
         """The least distance (K, r) of each round touch from its element over the box of ``x_i`` that the
@@ -1355,7 +1355,7 @@ class Tree:
         norm = np.linalg.norm(theta[:, :3], axis=1)
         omega = np.where(held[:, None], theta[:, :3] * np.minimum(1.0, c.delta / np.maximum(norm, 1e-300))[:, None], 0.0)
         start_R = c.R @ rotation_from_vector(omega)
-        box = self.box_centre(c)
+        box = self.box_centre(c.ylo, c.yhi)
         start_y = np.where(held[:, None], theta[:, 3:6], box)
         a = c.a if self.sensors is None else turned_points(self.markers - self.centroid, c.R)
         kappa = (c.delta**2 / 2.0 + c.delta**3 / 6.0)[:, None] * self.marker_rho[None]
@@ -1514,13 +1514,18 @@ def propagated(slabs, lo, hi, rounds):
     same for every box or (K, S, 3) each its own, low and high (K, S); each slab narrows each axis to what the
     box's other axes leave it, ``rounds`` times over all slabs at once (g within 1e-12 of 0 taken as 0). A shared
     g is neither copied per box nor split by sign per box."""
-    slabs = [(np.where(np.abs(g) <= 1e-12, 0.0, g), low, high) for g, low, high in slabs]
+    slabs = [(_held_axes(g), low, high) for g, low, high in slabs]
     for _ in range(rounds):
         y_lo, y_hi = np.maximum(lo, -BIG_MM), np.minimum(hi, BIG_MM)
         narrowed = [_narrowed(g, low, high, y_lo, y_hi) for g, low, high in slabs]
         lo = np.maximum(lo, across(np.maximum, np.stack([a for a, _ in narrowed], axis=1)))
         hi = np.minimum(hi, across(np.minimum, np.stack([b for _, b in narrowed], axis=1)))
     return lo, hi
+
+
+def _held_axes(g):
+    """Slab directions g with parts within 1e-12 of 0 taken as 0: axes the slabs do not hold."""
+    return np.where(np.abs(g) <= 1e-12, 0.0, g)
 
 
 def _spanned(g, y_lo, y_hi):
@@ -1538,7 +1543,7 @@ def missed(slabs, lo, hi):
     y_lo, y_hi = np.maximum(lo, -BIG_MM), np.minimum(hi, BIG_MM)
     out = np.zeros(len(lo), bool)
     for g, low, high in slabs:
-        bottom, top = _spanned(np.where(np.abs(g) <= 1e-12, 0.0, g), y_lo, y_hi)[:2]
+        bottom, top = _spanned(_held_axes(g), y_lo, y_hi)[:2]
         out |= np.any((top < low) | (bottom > high), axis=1)
     return out
 
