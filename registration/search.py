@@ -27,7 +27,8 @@ docs/registration.md (:meth:`Tree.cells`):
 * first order (:meth:`Tree.first_order`): with ``R = R0 exp(omega)`` the rows
   are linear in ``(omega, y)`` give or take a proven remainder, ``y`` is
   eliminated exactly, and the least value over ``|omega| <= delta`` is
-  bounded by weak duality.
+  bounded by weak duality, less the remainders' length; or, by weak duality
+  on the rows' errors too, :func:`dual_bound`.
 
 On a printed part the zeroth order takes each distance less its deviation
 bound ``e_i``, and the first order carries the part's deviation modes as
@@ -481,6 +482,7 @@ class Tree:
         flat = np.flatnonzero(self.flat)
         spans = [row_span(self.core[i] == "plane", self.direction[i]) for i in flat]
         self.row_touch = np.repeat(flat, [len(m) for m in spans]).astype(int)
+        self.row_first = np.cumsum([0] + [len(m) for m in spans[:-1]]).astype(int)  # each flat touch's first row
         self.row_unit = np.concatenate(spans) if spans else np.zeros((0, 3))
         self.H_flat_least, self.H_flat_pinv = least_and_pinv(self.row_unit.T @ self.row_unit)
         self.flat_swing = largest_swing(b[self.flat])
@@ -793,8 +795,9 @@ class Tree:
         touch's move D over the cell (its turn, ``kappa`` (K, m) the turn's remainder, and the y box) keeps it off
         its core (else its row is 0: no model); ``turn`` (K, m): how far its direction from the core turns (rad;
         inf where not usable). The distance ``|s|`` is convex in the touch's place: above its tangent at s_0, by
-        at most the bend ``|D|^2 / (2 (|s_0| - |D|))``; the model takes half the bend, and is off by the other
-        half either way, and by kappa."""
+        at most the bend ``|D|^2 / (2 |s_0|)`` (the most of ``|s_0 + D| - |s_0| - u.D`` over ``|D| <= 2 |s_0|``,
+        reached where ``u.D = -|D|^2 / (2 |s_0|)``); the model takes half the bend, and is off by the other half
+        either way, and by kappa."""
         centre = self.box_centre(c.ylo, c.yhi)
         half = 0.5 * (c.yhi - c.ylo)
         half = np.where(self.aligned[None, self.round], np.linalg.norm(half[:, :2], axis=1)[:, None],
@@ -802,10 +805,11 @@ class Tree:
         d0, u = self.distances(c.a, centre)
         d0, u = d0[:, self.round], u[:, self.round]
         move = c.delta[:, None] * self.rho[self.round] + half + kappa
-        core_gap = d0 + self.offset[self.round] - move  # the least |s| over the move
+        s0 = d0 + self.offset[self.round]
+        core_gap = s0 - move  # the least |s| over the move
         usable = core_gap > 0.0
         gap = np.where(usable, core_gap, 1.0)
-        bend = np.where(usable, move**2 / (4.0 * gap), 0.0)
+        bend = np.where(usable, move**2 / (4.0 * np.where(usable, s0, 1.0)), 0.0)
         value = np.where(usable, d0 + bend - np.einsum("kri,ki->kr", u, centre), 0.0)
         return value, np.where(usable[..., None], u, 0.0), np.where(usable, kappa + bend, 0.0), usable, \
             np.where(usable, move / gap, np.inf)
@@ -907,7 +911,7 @@ class Tree:
         self.first_order(c)
         # The zeroth-order bound holds the cost with each distance less its deviation bound, the first-order one
         # the test's own cost; a pose over T in the first is over it in the second (docs/registration.md).
-        c.first = np.maximum(np.sqrt(c.least) - c.remainder, 0.0) ** 2
+        c.first = np.maximum(np.maximum(np.sqrt(c.least) - c.remainder, 0.0) ** 2, c.dual)
         c.bound = np.maximum(c.zeroth, c.first)
         # The y of a pose that may pass lies in the model's ellipsoid: the box shrinks to its shadow on the box's
         # axes (the remainders hold over the box it had).
@@ -1031,26 +1035,28 @@ class Tree:
 
     def first_order(self, c):
         """The touches' rows to first order in the cell's turn ``omega`` (``R = R0 exp(omega)``, ``|omega| <=
-        delta``) and image y: ``value + Jw.omega + m.y``, off the true rows by at most ``remainder`` (mm, the
-        root of their squares). A turn puts touch i at ``exp(-omega) a_i = a_i + a_i x omega + e_i``,
-        ``|e_i| <= (delta^2/2 + delta^3/6) rho_i``; a round touch's distance ``|s| - r`` (``s`` its offset from
-        the core) lies above its tangent by at most ``|D|^2 / (2 (|s_0| - |D|))`` over a move D
-        (:meth:`round_rows`). Fills
-        ``least``: a lower bound of the model's least cost over ``|omega| <= delta`` and any y (weak
-        duality: ``Q0 - b^T (A + lambda I)^-1 b - lambda delta^2`` for any lambda >= 0, y eliminated exactly),
-        and what :meth:`leaf_poses` needs."""
+        delta``) and image y: ``value + Jw.omega + m.y``, off the true rows by a vector no longer than
+        ``remainder`` (mm). A turn puts touch i at ``exp(-omega) a_i = a_i + a_i x omega + e_i``, ``|e_i| <=
+        (delta^2/2 + delta^3/6) rho_i``; a round touch's distance ``|s| - r`` (``s`` its offset from the core)
+        lies above its tangent by at most the bend (:meth:`round_rows`). Fills ``least``: a lower bound of the
+        model's least cost over ``|omega| <= delta`` and any y (weak duality: ``Q0 - b^T (A + lambda I)^-1 b -
+        lambda delta^2`` for any lambda >= 0, y eliminated exactly), ``dual``: a lower bound of the cost
+        (:func:`dual_bound`, at the model's rows where that lambda puts its least), and what :meth:`leaf_poses`
+        needs."""
         K = len(c.v)
         kappa = (c.delta**2 / 2.0 + c.delta**3 / 6.0)[:, None] * self.rho[None]
         unit = np.broadcast_to(self.row_unit, (K,) + self.row_unit.shape)
         a_rows = c.a[:, self.row_touch]
         value = np.einsum("kri,kri->kr", unit, a_rows - self.flat_anchor[self.row_touch])
-        remainder2 = np.sum(kappa[:, self.flat] ** 2, axis=1)
+        # Each row's own remainder (K, rows); a flat touch's turn remainder kappa moves its rows together, a vector
+        # of length at most kappa across them.
+        row_off = [np.zeros(value.shape)]
         if self.round.any():
             round_value, u, off, usable, turn = self.round_rows(c, kappa[:, self.round])
             unit = np.concatenate([unit, u], axis=1)
             a_rows = np.concatenate([a_rows, c.a[:, self.round]], axis=1)
             value = np.concatenate([value, round_value], axis=1)
-            remainder2 = remainder2 + np.sum(off**2, axis=1)
+            row_off.append(off)
         # A round touch whose move may reach its core has no tangent model: the cell is no leaf.
         c.modelled = np.all(usable, axis=1) if self.round.any() else np.ones(K, bool)
         Jw = cross(unit, a_rows)  # row j's change with omega: m . (a x omega) = (m x a) . omega
@@ -1058,8 +1064,9 @@ class Tree:
         if self.sensors is not None:
             unit, Jw = np.concatenate([unit, c.s_m], axis=1), np.concatenate([Jw, c.s_jw], axis=1)
             value = np.concatenate([value, c.s_value], axis=1)
-            remainder2 = remainder2 + np.sum(c.s_rem**2, axis=1)
+            row_off.append(c.s_rem)
             c.modelled = c.modelled & c.s_fine
+        row_off = np.concatenate(row_off, axis=1)
         # The rows' columns (value, then omega's and y's) and their products: all the bound and the ellipsoid need.
         columns = np.concatenate([value[..., None], Jw, unit], axis=2)
         gram = columns.transpose(0, 2, 1) @ columns
@@ -1078,7 +1085,7 @@ class Tree:
                 off_dev[:, rounds] += turn * self.turn_dev[self.round]
             # A stand-in's radius mode along its sensor's normal turns with the cell: off by delta times its size.
             off_dev += c.delta[:, None] * self.radius_dev[touch]
-            remainder2 = remainder2 + np.sum(off_dev**2, axis=1)
+            row_off[:, :touch_rows] += off_dev
             Jz = self.deviation_rows(unit[:, :touch_rows], touch, c.a + centre[:, None], c.R)
             if self.sensors is not None:
                 # A sensor's row moves with its feature's modes as the row's twist and radius say (its remainder
@@ -1090,14 +1097,19 @@ class Tree:
             # u eliminated exactly: min over u of |v - Jz u|^2 + sigma^2 |u|^2 (:func:`_modes_eliminated`), the
             # model's least and its ellipsoid's shadow on (omega, y) as with u among the unknowns.
             gram = gram - _modes_eliminated(Jz, self.problem.sigma, columns)
-        c.remainder = np.sqrt(remainder2)
+        # The rows' error is a flat touch's turn vector plus each row's own: its length at most the root of the
+        # squares of each flat touch's kappa plus its rows' own (their root) and of every other row's own.
+        flat_kappa = kappa[:, self.flat]
+        c.remainder = np.sqrt(np.sum((flat_kappa + self.flat_sizes(row_off)) ** 2, axis=1)
+                              + np.sum(row_off[:, len(self.row_touch):] ** 2, axis=1))
         c.gram = gram
         h, E = np.linalg.eigh(gram[:, 4:, 4:])
         c.H_pinv = (E * np.where(h > 1e-9 * h[:, -1:], 1.0 / np.maximum(h, 1e-300), 0.0)[:, None]) @ E.transpose(0, 2, 1)
         A, c.b, c.Q0 = _reduced(gram, c.H_pinv)
         c.alpha, c.V = np.linalg.eigh(A)
         c.alpha = np.maximum(c.alpha, 0.0)
-        beta2 = np.einsum("kij,ki->kj", c.V, c.b) ** 2
+        beta = np.einsum("kij,ki->kj", c.V, c.b)
+        beta2 = beta**2
         # Newton on the secular equation 1/|p(lambda)| = 1/delta from lambda = 0 (monotone from below), until it
         # stops moving.
         lam = np.zeros(K)
@@ -1119,6 +1131,21 @@ class Tree:
         terms = np.where(beta2 > 0.0, beta2 / np.where(shifted > 0.0, shifted, 1.0), 0.0)
         terms = np.where((shifted <= 0.0) & (beta2 > 1e-30), np.inf, terms)
         c.least = np.maximum(c.Q0 - np.sum(terms, axis=1) - lam * c.delta**2, 0.0)
+        # The model's rows at its least with that lambda: omega* = -(A + lambda I)^-1 b, y* eliminated, the modes' u*.
+        omega = -np.einsum("kij,kj->ki", c.V, np.where(shifted > 0.0, beta / np.where(shifted > 0.0, shifted, 1.0), 0.0))
+        y = -np.einsum("kij,kj->ki", c.H_pinv, gram[:, 4:, 0] + np.einsum("kij,ki->kj", gram[:, 1:4, 4:], omega))
+        rows = np.einsum("krj,kj->kr", columns, np.concatenate([np.ones((K, 1)), omega, y], axis=1))
+        modes = np.zeros(K)
+        if self.L is not None:
+            rows, modes = _modes_left(Jz, self.problem.sigma, rows)
+        c.dual = dual_bound(columns, rows, modes, c.delta, box_middle(c.ylo, c.yhi), 0.5 * (c.yhi - c.ylo), self.Q,
+                            row_off, flat_kappa, self.flat_sizes(rows))
+
+    def flat_sizes(self, x):
+        """Each flat touch's length (K, f) of its rows' part of x (K, rows)."""
+        if not len(self.row_touch):
+            return np.zeros((len(x), 0))
+        return np.sqrt(np.add.reduceat(x[:, :len(self.row_touch)] ** 2, self.row_first, axis=1))
 
     def box_centre(self, ylo, yhi):
         """The centres (K, 3) of y boxes (box axes), fixture frame (0 along an unbounded axis)."""
@@ -1693,6 +1720,41 @@ def _modes_eliminated(Jz, sigma, columns):
         return columns.transpose(0, 2, 1) @ np.linalg.solve(sigma**2 * np.eye(r) + G, G) @ columns
     B = Jt @ columns
     return B.transpose(0, 2, 1) @ np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(k), B)
+
+
+def _modes_left(Jz, sigma, v):
+    """Rows v (K, r) less the modes' part at the least over u of ``|v - Jz u|^2 + sigma^2 |u|^2``, and that
+    least's ``sigma^2 |u|^2`` (K,)."""
+    r, k = Jz.shape[1:]
+    Jt = Jz.transpose(0, 2, 1)
+    if r < k:
+        u = np.einsum("kij,kj->ki", Jt, np.linalg.solve(sigma**2 * np.eye(r) + Jz @ Jt, v[..., None])[..., 0])
+    else:
+        u = np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(k), np.einsum("kij,kj->ki", Jt, v)[..., None])[..., 0]
+    return v - np.einsum("krj,kj->kr", Jz, u), sigma**2 * np.sum(u**2, axis=1)
+
+
+def dual_bound(columns, rows, modes, delta, middle, half, Q, row_off, kappa, kappa_size):
+    """A lower bound (K,) of the cost over cells (turns ``|omega| <= delta`` (K,), y boxes of ``middle`` and
+    ``half`` (K, 3) on the axes Q) whose rows lie within ``row_off`` (K, n) each of the model ``columns . (1,
+    omega, y)`` (columns (K, n, 7); less ``Jz u`` on a printed part, u costing ``sigma^2 |u|^2``), and the flat
+    touches' rows also within a vector of length ``kappa`` (K, f) each: weak duality, multipliers ``2 s r``, r
+    the model's ``rows`` (K, n) at some point, ``modes`` its u's ``sigma^2 |u|^2`` (K,), ``kappa_size`` (K, f)
+    each flat touch's length of r (docs/registration.md). A row is at least its distance from its error
+    interval, whose square is at least ``l x - l^2 / 4 - off |l|`` for any l (a touch's rows: ``l.x - |l|^2 /
+    4 - kappa |l|``), and ``-Jz^T l . u + sigma^2 |u|^2 >= -|Jz^T l|^2 / (4 sigma^2)``; over the cell that is
+    ``2 s G1 - s^2 G2``, ``G1 = r.value - delta |Jw^T r| + min over the box of (m^T r).y - off.|r| - kappa.|r|``,
+    ``G2 = |r|^2 + |Jz^T r|^2 / sigma^2`` (the latter ``modes`` where u is least for r), whose most over ``s >=
+    0`` is ``G1^2 / G2``."""
+    pull = np.einsum("krj,kr->kj", columns, rows)  # (r.value, Jw^T r, m^T r)
+    g = pull[:, 4:] @ Q
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y_least = np.sum(g * middle - np.where(g == 0.0, 0.0, np.abs(g) * half), axis=1)
+        # (a row at 0 has multiplier 0: nothing, however large its remainder)
+        spread = np.sum(np.where(rows == 0.0, 0.0, row_off * np.abs(rows)), axis=1) + np.sum(kappa * kappa_size, axis=1)
+        G1 = pull[:, 0] - delta * np.linalg.norm(pull[:, 1:4], axis=1) + y_least - spread
+        G2 = np.sum(rows**2, axis=1) + modes
+        return np.where((G1 > 0.0) & (G2 > 0.0), G1**2 / G2, 0.0)
 
 
 def _reduced(gram, H_pinv):

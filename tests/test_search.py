@@ -6,7 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
-from scipy.optimize import linprog
+from scipy.optimize import linprog, minimize
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -18,8 +18,8 @@ from fixturecad.registration.least_squares import levenberg_marquardt
 from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
-from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, _modes_eliminated, across_rows,
-                                            first_turns, largest_swing, measured_normal, missed, normal_cones,
+from fixturecad.registration.search import (TUBE_BOXES, Cells, Tree, _joined, _modes_eliminated, _modes_left,
+                                            across_rows, dual_bound, first_turns, largest_swing, measured_normal, missed, normal_cones,
                                             normal_signs, propagated, rotation_boxes, row_span, search, shell_box,
                                             stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
@@ -143,10 +143,10 @@ def test_a_round_touch_s_distance_lies_within_its_remainder_of_its_model(name, c
     """Spheres, cylinders (one along the box's axis, bosses across it) and ball tips: on 300 random cells, 64
     poses each (a rotation of the cell's box, half at its corners, and a y of its box), each round touch's
     distance lies within ``off`` of its first-order row (:meth:`Tree.round_rows`), on some within a hundredth of
-    the half bend of its lower end (the tangent) and within 0.6 of it of its upper end (the bend's bound takes
-    the whole move across the touch's direction, at the core's least distance): the model sits halfway up the
-    bend a convex distance may take. It fails when the model leaves out the half bend, or the bend is taken two
-    thirds as large."""
+    the half bend of its lower end (the tangent) and within a fifth of it of its upper end (the bend's bound is
+    the most over a ball of moves, which the corners of a cell's box come near): the model sits halfway up the
+    bend a convex distance may take. It fails when the model leaves out the half bend, or the bend is taken 0.9
+    times as large."""
     rng = np.random.default_rng(29)
     problem, R, t = _problem(name, counts, ball, rng)
     tree = Tree(problem, threshold_mm2(problem))
@@ -178,7 +178,7 @@ def test_a_round_touch_s_distance_lies_within_its_remainder_of_its_model(name, c
         if some.any():
             low = min(low, np.min(((d - model) + off[0])[:, some] / bend[some]))
             high = min(high, np.min((off[0] - (d - model))[:, some] / bend[some]))
-    assert low < 0.01 and high < 0.6, (low, high)
+    assert low < 0.01 and high < 0.2, (low, high)
 
 
 @pytest.mark.parametrize("name,counts,ball", CASES, ids=IDS)
@@ -1091,3 +1091,70 @@ def test_eliminating_the_modes_leaves_each_combination_its_least_cost_over_them(
                                 rcond=None)[0]
             least = np.sum((Jz[k] @ u - v) ** 2) + sigma**2 * u @ u
             assert x @ (columns[k].T @ columns[k] - eliminated[k]) @ x == pytest.approx(least, rel=1e-6, abs=1e-12)
+            left, penalty = _modes_left(Jz[k:k + 1], sigma, v[None])
+            assert left[0] == pytest.approx(v - Jz[k] @ u, rel=1e-6, abs=1e-9)
+            assert penalty[0] == pytest.approx(sigma**2 * u @ u, rel=1e-6, abs=1e-12)
+
+
+@pytest.mark.parametrize("modes", [0, 4], ids=["exact", "printed"])
+def test_the_dual_bound_is_at_most_the_least_cost_its_remainders_allow(modes):
+    """:func:`dual_bound` against scipy's solver of the convex problem it bounds: the least over ``|omega| <=
+    delta``, y and the modes u (``sigma^2 |u|^2`` each) of ``sum max(|rows_t| - kappa_t, 0)^2`` over three flat
+    touches' pairs of rows and ``sum max(|row| - off, 0)^2`` over six more rows, the rows ``columns . (1, omega,
+    y) - Jz u`` (60 random cells, the multipliers the model's rows where its squares are least, as the search
+    takes them). Never above it, never below the norm bound ``(sqrt(least) - |remainders|)^2`` and over it by
+    5 % on 20 of the 30 cells with random remainders; on the others, with remainders in proportion to the
+    multipliers' rows, where the least is reached at the same point (with modes, no remainders), equal to it.
+    It fails with the rows' own remainders, the touches' kappa, the turn's term or the modes' left out."""
+    rng = np.random.default_rng(3)
+    sigma, flat, n = 0.1, 3, 12
+    above = 0
+    for k in range(60):
+        columns = np.concatenate([rng.normal(0, 0.2, (n, 1)), rng.normal(0, 30.0, (n, 3)),
+                                  rng.normal(0, 1.0, (n, 3))], axis=1)[None]
+        Jz = rng.normal(0, 1.0, (1, n, modes))
+        delta = np.array([rng.uniform(0.0005, 0.005)])
+        middle, half = rng.normal(0, 0.2, (1, 3)), rng.uniform(0.02, 0.5, (1, 3))
+        Q = perpendicular_basis(rng.normal(size=3))
+        Q = np.column_stack(Q + (np.cross(*Q),))
+
+        def model(x):
+            """The rows at x = (omega, y on the box's axes, u)."""
+            return columns[0] @ np.concatenate([[1.0], x[:3], Q @ x[3:6]]) - Jz[0] @ x[6:]
+
+        def least(function):
+            """The least of a convex function over the turn's ball, y free."""
+            return minimize(function, np.concatenate([np.zeros(3), middle[0], np.zeros(modes)]), method="SLSQP",
+                            options={"ftol": 1e-15, "maxiter": 1000},
+                            constraints=[{"type": "ineq", "fun": lambda x: delta[0] ** 2 - x[:3] @ x[:3]}])
+
+        # The multipliers as the search takes them: the model's rows where its squares are least (u held by sigma).
+        fit = least(lambda x: model(x) @ model(x) + sigma**2 * x[6:] @ x[6:])
+        rows = model(fit.x)[None]
+        sizes = np.linalg.norm(rows[0, :2 * flat].reshape(flat, 2), axis=1)[None]
+        proportional = k % 2 == 0
+        if proportional:
+            share = 0.0 if modes else rng.uniform(0.1, 0.6)
+            off = np.concatenate([np.zeros(2 * flat), share * np.abs(rows[0, 2 * flat:])])[None]
+            kappa = share * sizes
+        else:
+            off = np.concatenate([np.zeros(2 * flat), rng.uniform(0, 0.15, n - 2 * flat)])[None]
+            kappa = rng.uniform(0, 0.15, (1, flat))
+
+        def cost(x):
+            r = model(x)
+            touches = np.linalg.norm(r[:2 * flat].reshape(flat, 2), axis=1)
+            rounds = np.maximum(np.abs(r[2 * flat:]) - off[0, 2 * flat:], 0)
+            return np.sum(np.maximum(touches - kappa[0], 0) ** 2) + rounds @ rounds + sigma**2 * x[6:] @ x[6:]
+
+        penalty = np.sum((Jz[0].T @ rows[0]) ** 2)[None] / sigma**2
+        bound = dual_bound(columns, rows, penalty, delta, middle, half, Q, off, kappa, sizes)[0]
+        # (y free: the multipliers leave the box's term nought, and the least with y free is the sharper check)
+        truth = least(cost).fun
+        assert bound <= truth * (1 + 1e-6) + 1e-12
+        if proportional:
+            assert bound == pytest.approx(truth, rel=1e-3)
+        norm = max(np.sqrt(fit.fun) - np.sqrt(np.sum(kappa**2) + np.sum(off**2)), 0.0) ** 2
+        assert bound >= norm * (1 - 1e-3) - 1e-12  # (the solver's fit is a little off its least)
+        above += not proportional and bound > 1.05 * norm
+    assert above >= 20
