@@ -92,6 +92,7 @@ WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses
 WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions' poses that pass
 FIRST_TURN_PLANES = 4  # planes' normals a search starts from at most (two signs each: 2^4 choices)
 TUBE_BOXES = 512  # rotation boxes about one plane's measured normal a search starts from at most, each sign
+ROUND_TURN_SPREAD = 2.0  # where round touches are, a turn is split once it moves them more than half the y box is wide
 CONTRACT_ROUNDS = 1  # rounds of interval propagation over the slabs that hold y (:meth:`Tree.contract`)
 SLAB_ACROSS = 0.1  # a box axis whose part across a slanted line core is shorter than this gives that core no slab
 SLAB_TRIPLES = 8  # sets of three located sensors' slabs whose box bounds y (:func:`slab_triples`), at most ...
@@ -580,7 +581,7 @@ class Tree:
         self.triples = slab_triples(self.axial_normals)
         # How much farther than their slabs a turn moves the box they bound where no point is touched (their
         # box's half-diagonal over its slabs' half-width, the least over the triples; :meth:`leaves`).
-        self.turn_spread = 1.0 if len(self.points) or not self.triples else \
+        self.turn_spread = ROUND_TURN_SPREAD if self.round.any() else 1.0 if len(self.points) or not self.triples else \
             min(np.linalg.norm(np.abs(inverse) @ np.ones(3)) for _, inverse in self.triples)
 
     @functools.cached_property
