@@ -1259,7 +1259,7 @@ class Tree:
             return self._regions(partial, Tries(stop, WEAK_TRIES), Tries(stop, WEAK_TRIES), kept)
         except WeakPose as weak:
             return Regions(complete=False, cells=kept, weak=weak.found,
-                           reason="stopped at a pose that passes but that the touches determine too weakly to judge")
+                           reason="stopped at a pose that passes but that the touches leave free or determine too weakly to judge")
 
     def _regions(self, partial, level_tries, region_tries, kept):
         """:meth:`regions`' search, its stop tried on valleys' cells and on wide regions' poses."""

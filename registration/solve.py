@@ -126,13 +126,13 @@ def judged_all(problem, solutions, starts, refined, extents=(), found=None, good
 
 def _weak_stop(problem):
     """The search's ``stop``: the :class:`.verdict.Solution` refined from (R, t) when it passes, on its patches,
-    with rank 6 but too weakly determined to judge (the verdict's ``weak``), else None. One such pose makes the
-    answer underdetermined (:func:`.engine.register_touches`), whatever else passes: no further search can
-    change it."""
+    but with rank under 6 or too weakly determined to judge (the verdict's ``weak``), else None. One such pose
+    makes the answer underdetermined (:func:`.engine.register_touches`), whatever else passes: no further search
+    can change it."""
     def stop(R, t):
         R, t, r, J = levenberg_marquardt(problem, R, t)
         s = judged(problem, Solution(R, t, r, J), problem.scale())
-        return s if s.good and s.weak else None
+        return s if s.passes and s.admissible and (s.rank < 6 or s.weak) else None
     return stop
 
 

@@ -975,6 +975,22 @@ def test_a_weak_pose_stops_the_search(monkeypatch):
     assert full["status"] == "underdetermined" and full["search"] == "complete"
 
 
+def test_a_pose_that_leaves_a_motion_free_stops_the_search():
+    """A pose that passes on its patches with rank under 6 (a motion the touches leave free, to the rank's
+    tolerance) makes the answer `underdetermined` as a weak one does: the search stops at it, the motion named.
+    (An inclined plane's 2 + 4 layout at 5 um whose touches leave a screw motion free; without the stop its
+    valley of poses grows to the cell limit, the search incomplete for that.)"""
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.touchfile import exit_code
+    from search_cases import CASES, layout
+
+    lay = layout(next(c for c in CASES if c.name == "inclined-plane-cylinder 2+4"), 0.005, 3012)
+    result = register_touches(lay.features, lay.touches, sigma_mm=0.005)
+    assert result["status"] == "underdetermined" and result["search"] == "incomplete" and result["rank"] == 5
+    assert "leave free" in result["search_reason"] and exit_code(result) == 4
+    assert result["free_motions"][0].startswith("screw motion")
+
+
 def _edge_modes(tolerance, fid, q, rng, count):
     """``count`` mode vectors z (count, k) of a printed feature as far as a pose that passes allows: ``z = L u``
     (``L L^T`` its modes' covariance), ``|u|^2 = q``, u's direction at random."""
