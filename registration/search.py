@@ -800,13 +800,9 @@ class Tree:
         reached where ``u.D = -|D|^2 / (2 |s_0|)``); the model takes half the bend, and is off by the other half
         either way, and by kappa."""
         centre = self.box_centre(c.ylo, c.yhi)
-        half = 0.5 * (c.yhi - c.ylo)
-        half = np.where(self.aligned[None, self.round], np.linalg.norm(half[:, :2], axis=1)[:, None],
-                        np.linalg.norm(half, axis=1)[:, None])
-        d0, u = self.distances(c.a, centre)
-        d0, u = d0[:, self.round], u[:, self.round]
+        s0, u, half = self.round_offsets(c, centre)
+        d0 = s0 - self.offset[self.round]
         move = c.delta[:, None] * self.rho[self.round] + half + kappa
-        s0 = d0 + self.offset[self.round]
         core_gap = s0 - move  # the least |s| over the move
         usable = core_gap > 0.0
         gap = np.where(usable, core_gap, 1.0)
@@ -814,6 +810,16 @@ class Tree:
         value = np.where(usable, d0 + bend - np.einsum("kri,ki->kr", u, centre), 0.0)
         return value, np.where(usable[..., None], u, 0.0), np.where(usable, kappa + bend, 0.0), usable, \
             np.where(usable, move / gap, np.inf)
+
+    def round_offsets(self, c, centre):
+        """Each round touch's offset from its core at R0 with y the box's centre (fixture frame): its length
+        ``|s_0|`` and direction u (K, r, 3), and how far the y box moves it across the core (K, r): the box's
+        half-diagonal, across the box's last axis for a cylinder along it."""
+        d0, u = self.distances(c.a, centre)
+        half = 0.5 * (c.yhi - c.ylo)
+        half = np.where(self.aligned[None, self.round], np.linalg.norm(half[:, :2], axis=1)[:, None],
+                        np.linalg.norm(half, axis=1)[:, None])
+        return d0[:, self.round] + self.offset[self.round], u[:, self.round], half
 
     def cells(self, v, w, ylo, yhi):
         """Each cell's rotation, touches at ``R0``, y box shrunk to the patches, lower bound of the cost, and its
@@ -954,6 +960,8 @@ class Tree:
             low.append(a)
             high.append(b)
         slabs = [(np.concatenate(g), np.concatenate(low, axis=1), np.concatenate(high, axis=1))]
+        if self.round.any():
+            slabs.append(self.round_slabs(c, reach[:, self.round]))
         if len(self.pairs):
             i, j = self.pairs.T
             k, m = self.pair_index.T
@@ -986,6 +994,20 @@ class Tree:
             c.ylo[live], c.yhi[live] = propagated(slabs, lo, hi, CONTRACT_ROUNDS)
         room[live] = ~np.any(c.ylo[live] > c.yhi[live], axis=1)
         return room
+
+    def round_slabs(self, c, reach):
+        """Slabs ``low <= g.y <= high`` (g (K, r, 3) on the box's axes; low, high (K, r)) that hold every y of the
+        cells' boxes that puts each round touch within its ``reach`` (K, r) of its element at R0: its offset from
+        the core, ``s_0 + P e`` about the box's centre (e = y - y_c), has its length within reach of the radius;
+        that length lies above the tangent ``|s_0| + u.e`` (convex) and below it plus the bend of ``|P e|``
+        (:meth:`round_rows`): a slab along the outward direction u (none where the touch lies on its core)."""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            centre = self.box_centre(c.ylo, c.yhi)
+            s0, u, half = self.round_offsets(c, centre)
+            bend = np.where(half <= 2.0 * s0, half**2 / (2.0 * s0), 2.0 * (half - s0))
+            along = np.einsum("kri,ki->kr", u, centre) + self.offset[self.round] - s0
+            return on_axes(u, self.Q), np.where(s0 > 0.0, along - reach - bend, -np.inf), \
+                np.where(s0 > 0.0, along + reach, np.inf)
 
     def closer(self, c):
         """Held cells modelled again about their model's ellipsoid, which holds every pose of theirs that may pass
