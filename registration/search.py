@@ -796,9 +796,8 @@ class Tree:
         touch's move D over the cell (its turn, ``kappa`` (K, m) the turn's remainder, and the y box) keeps it off
         its core (else its row is 0: no model); ``turn`` (K, m): how far its direction from the core turns (rad;
         inf where not usable). The distance ``|s|`` is convex in the touch's place: above its tangent at s_0, by
-        at most the bend ``|D|^2 / (2 |s_0|)`` (the most of ``|s_0 + D| - |s_0| - u.D`` over ``|D| <= 2 |s_0|``,
-        reached where ``u.D = -|D|^2 / (2 |s_0|)``); the model takes half the bend, and is off by the other half
-        either way, and by kappa."""
+        at most the bend (:func:`_bend`); the model takes half the bend, and is off by the other half either way,
+        and by kappa."""
         centre = self.box_centre(c.ylo, c.yhi)
         s0, u, half = self.round_offsets(c, centre)
         d0 = s0 - self.offset[self.round]
@@ -806,7 +805,7 @@ class Tree:
         core_gap = s0 - move  # the least |s| over the move
         usable = core_gap > 0.0
         gap = np.where(usable, core_gap, 1.0)
-        bend = np.where(usable, move**2 / (4.0 * np.where(usable, s0, 1.0)), 0.0)
+        bend = np.where(usable, 0.5 * _bend(move, np.where(usable, s0, 1.0)), 0.0)
         value = np.where(usable, d0 + bend - np.einsum("kri,ki->kr", u, centre), 0.0)
         return value, np.where(usable[..., None], u, 0.0), np.where(usable, kappa + bend, 0.0), usable, \
             np.where(usable, move / gap, np.inf)
@@ -1004,7 +1003,7 @@ class Tree:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             centre = self.box_centre(c.ylo, c.yhi)
             s0, u, half = self.round_offsets(c, centre)
-            bend = np.where(half <= 2.0 * s0, half**2 / (2.0 * s0), 2.0 * (half - s0))
+            bend = _bend(half, s0)
             along = np.einsum("kri,ki->kr", u, centre) + self.offset[self.round] - s0
             return on_axes(u, self.Q), np.where(s0 > 0.0, along - reach - bend, -np.inf), \
                 np.where(s0 > 0.0, along + reach, np.inf)
@@ -1155,7 +1154,8 @@ class Tree:
         terms = np.where((shifted <= 0.0) & (beta2 > 1e-30), np.inf, terms)
         c.least = np.maximum(c.Q0 - np.sum(terms, axis=1) - lam * c.delta**2, 0.0)
         # The model's rows at its least with that lambda: omega* = -(A + lambda I)^-1 b, y* eliminated, the modes' u*.
-        omega = -np.einsum("kij,kj->ki", c.V, np.where(shifted > 0.0, beta / np.where(shifted > 0.0, shifted, 1.0), 0.0))
+        omega = -np.einsum("kij,kj->ki", c.V,
+                           np.where(shifted > 0.0, beta / np.where(shifted > 0.0, shifted, 1.0), 0.0))
         y = -np.einsum("kij,kj->ki", c.H_pinv, gram[:, 4:, 0] + np.einsum("kij,ki->kj", gram[:, 1:4, 4:], omega))
         rows = np.einsum("krj,kj->kr", columns, np.concatenate([np.ones((K, 1)), omega, y], axis=1))
         modes = np.zeros(K)
@@ -1280,8 +1280,8 @@ class Tree:
         try:
             return self._regions(partial, Tries(stop, WEAK_TRIES), Tries(stop, WEAK_TRIES), kept)
         except WeakPose as weak:
-            return Regions(complete=False, cells=kept, weak=weak.found,
-                           reason="stopped at a pose that passes but that the touches leave free or determine too weakly to judge")
+            return Regions(complete=False, cells=kept, weak=weak.found, reason="stopped at a pose that passes but that "
+                           "the touches leave free or determine too weakly to judge")
 
     def _regions(self, partial, level_tries, region_tries, kept):
         """:meth:`regions`' search, its stop tried on valleys' cells and on wide regions' poses."""
@@ -1743,6 +1743,13 @@ def _modes_eliminated(Jz, sigma, columns):
         return columns.transpose(0, 2, 1) @ np.linalg.solve(sigma**2 * np.eye(r) + G, G) @ columns
     B = Jt @ columns
     return B.transpose(0, 2, 1) @ np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(k), B)
+
+
+def _bend(move, s0):
+    """The most (mm) that a distance ``|s|`` from a core lies above its tangent at ``s_0`` over a move of ``move``
+    (mm) across the core, ``|s_0|`` = ``s0``: ``move^2 / (2 |s_0|)`` up to ``2 |s_0|``, reached where ``u.D =
+    -|D|^2 / (2 |s_0|)`` (there ``|s_0 + D| = |s_0|``), then ``2 (move - |s_0|)`` (D against ``s_0``)."""
+    return np.where(move <= 2.0 * s0, move**2 / (2.0 * s0), 2.0 * (move - s0))
 
 
 def _modes_left(Jz, sigma, v):
