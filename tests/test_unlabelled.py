@@ -165,7 +165,7 @@ def test_a_touch_moved_off_its_feature_is_the_culprit(name, counts):
 
 @pytest.mark.parametrize("name,counts,seed,factor", [
     ("v-block", {"groove_a": 4, "groove_b": 4, "end": 4}, 3, 1.5),
-    ("inclined-plane-cylinder", {"plane": 6, "cylinder": 6}, 1, 1.6)])
+    ("inclined-plane-cylinder", {"plane": 6, "cylinder": 6}, 1, 1.53)])
 def test_a_touch_just_off_is_left_out_first_under_the_nearest_poses_assignment(name, counts, seed, factor,
                                                                                monkeypatch):
     """Touch 5 moved out of its feature by ``factor`` times the root of the test's threshold (the noise-free rest
@@ -173,7 +173,8 @@ def test_a_touch_just_off_is_left_out_first_under_the_nearest_poses_assignment(n
     left out first, under that pose's assignment: one labelled search beyond the full search's (in their order,
     touch 5 would be left out sixth, each time under every assignment the rest admit), and the verdict lists it
     among the touches whose removal explains it (so near, others' do too). Each layout in the middle of the
-    factors that do so (0.1 either side does too): nearer, a pose passes; farther, the search's cells fail
+    factors that do so (0.1 either side does too; 0.03 on the inclined plane since its round touches' bounds
+    tightened): nearer, a pose passes; farther, the search's cells fail
     before a leaf refines one, and every touch is left out in turn under every assignment."""
     from fixturecad.registration import unlabelled
     from fixturecad.registration.search import threshold_mm2
