@@ -39,7 +39,8 @@ slabs that each touch's reach puts ``y`` in, and each sensor's rows or given
 contact point (:meth:`Tree.contract`; with no point touch, three of the latter
 bound ``y`` by themselves). A cell left is
 split (its rotation box in eight while a turn moves the touches more than its
-``y`` box is wide, else its ``y`` box in two), or its rotation box narrowed to
+``y`` box is wide, or half as wide where round touches are, else its ``y`` box
+in two), or its rotation box narrowed to
 the model's ellipsoid (:meth:`Tree.narrowed`), until its first-order model is
 close (``LEAF_FRACTION``). The leaves, joined where they touch, are
 *regions*: every pose that passes lies in one. A region's pose is refined
