@@ -580,8 +580,9 @@ class Tree:
         self.axial_normals = np.array([d for _, _, d, *_ in self.sensors.axial]).reshape(-1, 3) @ self.Q \
             if self.sensors is not None else np.zeros((0, 3))
         self.triples = slab_triples(self.axial_normals)
-        # How much farther than their slabs a turn moves the box they bound where no point is touched (their
-        # box's half-diagonal over its slabs' half-width, the least over the triples; :meth:`leaves`).
+        # The turn's weight against the y box in the split rule (:meth:`leaves`): ROUND_TURN_SPREAD where round
+        # touches are; where no point is touched, how much farther than their slabs a turn moves the box they bound
+        # (their box's half-diagonal over its slabs' half-width, the least over the triples); else 1.
         self.turn_spread = ROUND_TURN_SPREAD if self.round.any() else 1.0 if len(self.points) or not self.triples else \
             min(np.linalg.norm(np.abs(inverse) @ np.ones(3)) for _, inverse in self.triples)
 
@@ -1730,20 +1731,23 @@ def split(v, w, ylo, yhi, turning, relevant):
     return [np.concatenate(p) for p in zip(*parts)]
 
 
-def _modes_eliminated(Jz, sigma, columns):
-    """What eliminating the modes u takes off the Gram matrix of the rows' ``columns`` (K, r, c): ``B^T C^-1 B``
-    (K, c, c), ``B = Jz^T columns``, ``C = sigma^2 I + Jz^T Jz`` (Jz (K, r, k)), so that a combination v of the
-    columns costs ``|v|^2 - v^T Jz C^-1 Jz^T v = min over u of |v - Jz u|^2 + sigma^2 |u|^2``. The smaller of two
-    equal systems (C positive definite, its least eigenvalue sigma^2): k by k, a part's few modes under many rows,
-    or r by r, ``Jz C^-1 Jz^T = (sigma^2 I + G)^-1 G``, ``G = Jz Jz^T`` (push-through), a few sensors' rows on
-    many features' modes."""
+def _modes_least(Jz, sigma, v):
+    """The modes u (K, k, c) at the least over u of ``|v - Jz u|^2 + sigma^2 |u|^2``, for each of v's columns (K, r,
+    c) (Jz (K, r, k)): ``u = C^-1 Jz^T v``, ``C = sigma^2 I + Jz^T Jz``. The smaller of two equal systems (C positive
+    definite, its least eigenvalue sigma^2): k by k, a part's few modes under many rows, or r by r, ``C^-1 Jz^T =
+    Jz^T (sigma^2 I + Jz Jz^T)^-1`` (push-through), a few sensors' rows on many features' modes."""
     r, k = Jz.shape[1:]
     Jt = Jz.transpose(0, 2, 1)
     if r < k:
-        G = Jz @ Jt
-        return columns.transpose(0, 2, 1) @ np.linalg.solve(sigma**2 * np.eye(r) + G, G) @ columns
-    B = Jt @ columns
-    return B.transpose(0, 2, 1) @ np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(k), B)
+        return Jt @ np.linalg.solve(sigma**2 * np.eye(r) + Jz @ Jt, v)
+    return np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(k), Jt @ v)
+
+
+def _modes_eliminated(Jz, sigma, columns):
+    """What eliminating the modes u takes off the Gram matrix of the rows' ``columns`` (K, r, c): ``B^T C^-1 B``
+    (K, c, c), ``B = Jz^T columns`` (:func:`_modes_least`), so that a combination v of the columns costs ``|v|^2 -
+    v^T Jz C^-1 Jz^T v = min over u of |v - Jz u|^2 + sigma^2 |u|^2``."""
+    return columns.transpose(0, 2, 1) @ Jz @ _modes_least(Jz, sigma, columns)
 
 
 def _bend(move, s0):
@@ -1754,14 +1758,9 @@ def _bend(move, s0):
 
 
 def _modes_left(Jz, sigma, v):
-    """Rows v (K, r) less the modes' part at the least over u of ``|v - Jz u|^2 + sigma^2 |u|^2``, and that
-    least's ``sigma^2 |u|^2`` (K,)."""
-    r, k = Jz.shape[1:]
-    Jt = Jz.transpose(0, 2, 1)
-    if r < k:
-        u = np.einsum("kij,kj->ki", Jt, np.linalg.solve(sigma**2 * np.eye(r) + Jz @ Jt, v[..., None])[..., 0])
-    else:
-        u = np.linalg.solve(Jt @ Jz + sigma**2 * np.eye(k), np.einsum("kij,kj->ki", Jt, v)[..., None])[..., 0]
+    """Rows v (K, r) less the modes' part at the least over u of ``|v - Jz u|^2 + sigma^2 |u|^2``
+    (:func:`_modes_least`), and that least's ``sigma^2 |u|^2`` (K,)."""
+    u = _modes_least(Jz, sigma, v[..., None])[..., 0]
     return v - np.einsum("krj,kj->kr", Jz, u), sigma**2 * np.sum(u**2, axis=1)
 
 
