@@ -644,12 +644,17 @@ class Tree:
     def first_cells(self):
         """The first level's cells: the rotation boxes that touched spheres' centres and planes' normals, and
         pairs of touches on planes and lines, leave (:func:`first_turns`), else every rotation
-        (:func:`first_cells`); y unbounded."""
+        (:func:`first_cells`; a lone box in its eight parts); y unbounded."""
         turn = first_turns(self.centres, self.normals, tube_pairs(self.planes, self.lines))
         if turn is None:
             return first_cells()
         v, w = turn
-        return v, w, np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
+        ylo, yhi = np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
+        if len(v) == 1:
+            # A lone box holds every turn that may pass: its eight parts are bounded at once (one level's bounds
+            # cost about the same for one cell as for eight, and a lone cell is split unless nothing passes).
+            v, w, ylo, yhi = split(v, w, ylo, yhi, np.ones(1, bool), self.relevant)
+        return v, w, ylo, yhi
 
     @functools.cached_property
     def fixes_pose(self):
