@@ -130,7 +130,8 @@ class Problem:
         pose's problem leaves out (:meth:`without`; -1: none), its rows zero.
 
         Each pose's sensors are mapped into the fixture frame (``R^T (x - t)``),
-        all K copies stacked into one call of the contact model at the identity.
+        all K copies stacked into one call of the contact model at the identity
+        a contact type (:attr:`batches`).
         The translation columns give the fixture-frame translation ``v`` that
         moves the pose to ``t + R v``. In that frame a printed part's mode
         moves the rows by ``J twist`` at every pose (:func:`.deviations.mode_rows`;
@@ -161,14 +162,24 @@ class Problem:
         """:meth:`evaluate_batch`'s rows whitened for the sensor noise only, and each row's feature id and touch
         index (m,); ``grow``: every sphere and cylinder grown by this many mm."""
         K = len(rotations)
-        parts = [self._group_rows(g, rotations, translations, grow) for g in self.groups]
-        rows = [v.shape[1] for v, _ in parts]  # (a touch's)
-        if self._batch_layout is None:  # each row's feature id, touch index and rows a touch: the same at every pose
-            self._batch_layout = (
-                np.array([g.feature.id for g, k in zip(self.groups, rows) for _ in range(g.count * k)], dtype=object),
-                np.concatenate([np.repeat(g.index, k) for g, k in zip(self.groups, rows)]), rows)
-        return (np.concatenate([v.reshape(K, -1) for v, _ in parts], axis=1),
-                np.concatenate([J.reshape(K, -1, 6) for _, J in parts], axis=1), *self._batch_layout[:2])
+        # One call of the contact model a contact type (:attr:`batches`), its rows then put in the groups' order.
+        parts = [self._group_rows(b, rotations, translations, grow) for b in self.batches]
+        if self._batch_layout is None:  # the same at every pose
+            self._batch_layout = self._layout([v.shape[1] for v, _ in parts])
+        feature, touch, _, order = self._batch_layout
+        return (np.concatenate([v.reshape(K, -1) for v, _ in parts], axis=1)[:, order],
+                np.concatenate([J.reshape(K, -1, 6) for _, J in parts], axis=1)[:, order], feature, touch)
+
+    def _layout(self, batch_rows):
+        """From the rows a touch of each batch: each row's feature id and touch index (m,) and each group's rows a
+        touch, in the groups' order, and where each row lies in the batches' order (m,)."""
+        per_touch = {int(t): k for b, k in zip(self.batches, batch_rows) for t in b.index}
+        rows = [per_touch[int(g.index[0])] for g in self.groups]
+        place = {key: n for n, key in enumerate((int(t), j) for b, k in zip(self.batches, batch_rows)
+                                                for t in b.index for j in range(k))}
+        return (np.array([g.feature.id for g, k in zip(self.groups, rows) for _ in range(g.count * k)], dtype=object),
+                np.concatenate([np.repeat(g.index, k) for g, k in zip(self.groups, rows)]), rows,
+                np.array([place[int(t), j] for g, k in zip(self.groups, rows) for t in g.index for j in range(k)], int))
 
     def _group_rows(self, g, rotations, translations, grow=0.0):
         """One group's rows (K count, k) and Jacobian (K count, k, 6) at K poses, whitened for the sensor noise:
@@ -186,6 +197,9 @@ class Problem:
             geometry[key] = moved.reshape((K * g.count,) + moved.shape[2:])
         sensor = type(g.sensor)(g.sensor.kind, g.sensor.fixed, geometry)
         fixture, rho = _grown(g, grow)
+        if g.feature is None:  # a batch of several features: its fixture geometry is per touch, as the sensors' is
+            fixture = type(fixture)(fixture.kind, fixture.fixed, {
+                key: np.tile(value, (K,) + (1,) * (np.ndim(value) - 1)) for key, value in fixture.geometry.items()})
         v, J = residuals_and_jacobian(g.ctype, sensor, fixture, np.eye(3), np.zeros(3), np.tile(rho, K))
         if not is_point_sensor(g.sensor):
             centres = (g.centre[None] - translations[:, None]) @ rotations

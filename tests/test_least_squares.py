@@ -9,9 +9,11 @@ from fixturecad.registration.problem import Problem
 from fixturecad.registration.touches import build_groups
 from search_cases import VARIANTS, layout
 
-# Exact and printed parts, point touches and sensors, planes, spheres and cylinders (radius modes among them).
+# Exact and printed parts, point touches and sensors, planes, spheres and cylinders (radius modes among them),
+# several features' groups of one contact type computed as one (the cube's planes, the sphere-plate's spheres).
 NAMES = ["cube 2-2-2", "inclined-plane-cylinder 2+4, printed", "Example One (paper plan), printed",
-         "{R}{C-R-C} design (default plan), printed", "{R}{G3-R} design (default plan)"]
+         "{R}{C-R-C} design (default plan), printed", "{R}{G3-R} design (default plan)",
+         "sphere-plate 4 per ball, printed"]
 SIGMA_MM = 0.005
 
 
