@@ -75,7 +75,9 @@ from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_M
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
 LEAF_FRACTION = 0.25  # a leaf's first-order model is off by at most this much of sqrt(T) (and the deviations) ...
 LEAF_MM = 0.0125  # ... or this (mm), the larger, at first; a region whose pose does not pass is split finer
-NEAR_LEAF = 4.0  # a cell whose remainder is within this many times a leaf's is modelled again about its ellipsoid
+NEAR_LEAF = 25.0  # a cell whose remainder is within this many times a leaf's is modelled again about its ellipsoid
+CLOSER_ROUNDS = 3  # ... at most this many times, while each round leaves at most this share of its remainder:
+CLOSER_GAIN = 0.5
 MAX_CELLS = 150000  # cells at one level, or leaves in all, beyond which the search stops, not complete
 MAX_LEAVES = 60000
 CONTINUUM = f"more than {MAX_CELLS} cells at one level or {MAX_LEAVES} leaves: a continuum of poses"
@@ -650,9 +652,10 @@ class Tree:
             return first_cells()
         v, w = turn
         ylo, yhi = np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
-        if len(v) == 1:
-            # A lone box holds every turn that may pass: its eight parts are bounded at once (one level's bounds
-            # cost about the same for one cell as for eight, and a lone cell is split unless nothing passes).
+        if len(v) == 1 and self.round.any():
+            # A lone box holds every turn that may pass: where round touches are, their bend over it keeps it far
+            # from a leaf and its model's ellipsoid too wide to narrow it, so its eight parts are bounded at once
+            # (one level's bounds cost about the same for one cell as for eight).
             v, w, ylo, yhi = split(v, w, ylo, yhi, np.ones(1, bool), self.relevant)
         return v, w, ylo, yhi
 
@@ -1234,14 +1237,21 @@ class Tree:
             leaf = c.modelled & (c.remainder <= limit)
             near = np.flatnonzero(~leaf & c.modelled & c.held & (c.remainder <= NEAR_LEAF * limit))
             if len(near):
-                # A cell a little short of a leaf, modelled again about its ellipsoid (:meth:`closer`): dropped,
-                # a leaf a level sooner, or split as it was.
-                closer = self.closer(c.take(near))
-                passes = closer.bound <= self.root**2
-                now = passes & closer.modelled & (closer.remainder <= limit)
-                stay = np.ones(len(c.v), bool)
-                stay[near[~passes | now]] = False
-                c = Cells.joined([c.take(stay), closer.take(now)])
+                # A cell a little short of a leaf, modelled again about its ellipsoid (:meth:`closer`), again while
+                # that narrows it: dropped, a leaf a level sooner, or split as it was.
+                stay, leaves, closer = np.ones(len(c.v), bool), [], c.take(near)
+                for _ in range(CLOSER_ROUNDS):
+                    before = closer.remainder
+                    closer = self.closer(closer)
+                    passes = closer.bound <= self.root**2
+                    now = passes & closer.modelled & (closer.remainder <= limit)
+                    stay[near[~passes | now]] = False
+                    leaves.append(closer.take(now))
+                    again = passes & ~now & closer.modelled & closer.held & (closer.remainder <= CLOSER_GAIN * before)
+                    closer, near = closer.take(again), near[again]
+                    if not len(near):
+                        break
+                c = Cells.joined([c.take(stay)] + leaves)
                 leaf = c.modelled & (c.remainder <= limit)
             if self.sensors is not None:
                 # Where the model (the touches' and the sensors' rows) leaves a motion free, a leaf's poses are its
