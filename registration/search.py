@@ -1417,7 +1417,7 @@ class Tree:
         mm of ``centre`` (K, n, 3). From the first-order model's 6-D ellipsoid ``Q(theta) <= (sqrt(T) +
         remainder + deviations)^2`` about its least ``theta*`` (its image under touch i's map ``[a_i x, I]``,
         plus twice the turn's remainder), or, where the model leaves a motion free, from the cell itself."""
-        W, theta, slack, held = self.ellipsoid(c)
+        W, theta, slack, held = c.W, c.theta, c.slack, c.held  # (:meth:`first_bound`'s)
         # The start: theta* with its turn brought into the cell.
         norm = np.linalg.norm(theta[:, :3], axis=1)
         omega = np.where(held[:, None], theta[:, :3] * np.minimum(1.0, c.delta / np.maximum(norm, 1e-300))[:, None], 0.0)
