@@ -165,21 +165,20 @@ class Problem:
         # One call of the contact model a contact type (:attr:`batches`), its rows then put in the groups' order.
         parts = [self._group_rows(b, rotations, translations, grow) for b in self.batches]
         if self._batch_layout is None:  # the same at every pose
-            self._batch_layout = self._layout([v.shape[1] for v, _ in parts])
+            for b, (v, _) in zip(self.batches, parts):
+                b.rows = v.shape[1]  # (a touch's, as :meth:`_rows` counts them)
+            self._batch_layout = self._layout()
         feature, touch, _, order = self._batch_layout
         return (np.concatenate([v.reshape(K, -1) for v, _ in parts], axis=1)[:, order],
                 np.concatenate([J.reshape(K, -1, 6) for _, J in parts], axis=1)[:, order], feature, touch)
 
-    def _layout(self, batch_rows):
-        """From the rows a touch of each batch: each row's feature id and touch index (m,) and each group's rows a
-        touch, in the groups' order, and where each row lies in the batches' order (m,)."""
-        per_touch = {int(t): k for b, k in zip(self.batches, batch_rows) for t in b.index}
-        rows = [per_touch[int(g.index[0])] for g in self.groups]
-        place = {key: n for n, key in enumerate((int(t), j) for b, k in zip(self.batches, batch_rows)
-                                                for t in b.index for j in range(k))}
-        return (np.array([g.feature.id for g, k in zip(self.groups, rows) for _ in range(g.count * k)], dtype=object),
-                np.concatenate([np.repeat(g.index, k) for g, k in zip(self.groups, rows)]), rows,
-                np.array([place[int(t), j] for g, k in zip(self.groups, rows) for t in g.index for j in range(k)], int))
+    def _layout(self):
+        """Each row's feature id and touch index (m,) in the groups' order, each group's rows a touch, and where
+        each row lies in the batches' order (:attr:`row_touch`) (m,)."""
+        touch = self.row_touch
+        order = np.concatenate([np.flatnonzero(touch == t) for g in self.groups for t in g.index])
+        return (self.row_feature[order], touch[order], [int(np.count_nonzero(touch == g.index[0])) for g in self.groups],
+                order)
 
     def _group_rows(self, g, rotations, translations, grow=0.0):
         """One group's rows (K count, k) and Jacobian (K count, k, 6) at K poses, whitened for the sensor noise:
