@@ -916,7 +916,7 @@ class Tree:
         """The bounded sensors' cost bound over the cells (K,); their first-order rows (``SENSOR_ROWS``) filled in
         (:meth:`.sensor_bounds.SensorBounds.cells`)."""
         sensed, *rows = self.sensors.cells(c.R, c.delta, self.box_centre(c.ylo, c.yhi),
-                                           np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1))
+                                           np.linalg.norm(0.5 * (c.yhi - c.ylo), axis=1), self.root)
         for name, x in zip(SENSOR_ROWS, rows):
             setattr(c, name, x)
         return sensed
@@ -1364,7 +1364,7 @@ class Tree:
         sensed = 0.0
         if self.sensors_apart and self.printed is not None:  # a printed part: the bound at the pose, deviations less
             sensed = self.sensors.cells(Rs, np.zeros(len(Rs)), np.einsum("kji,kj->ki", Rs, self.centroid - ts),
-                                        np.zeros(len(Rs)))[0]
+                                        np.zeros(len(Rs)), self.root)[0]
         elif self.sensors_apart:
             sensed = self.sensors.weight * np.sum(self.full.evaluate_batch(Rs, ts)[0][:, self.problem.size:] ** 2,
                                                   axis=1)

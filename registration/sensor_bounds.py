@@ -38,7 +38,9 @@ largest over the subsets below, each row's least size over the cell over a bound
   the true one, ``u.(x_a' - p*_c)``, is it times ``u.u_c >= 1 - |du|^2 / 2``, give or take ``delta |x_a - c|``
   (x_a's turn) and ``|y - y_c| |du|`` (``x_a' - p*_c`` off ``u_c``, zero at the centre): a pose that passes,
   its distance within ``rho`` plus ``sqrt(slack T)`` and its deviation, keeps y in a slab
-  (:meth:`SensorBounds.slabs`).
+  (:meth:`SensorBounds.slabs`). With ``rho > 0`` the rows model the signed distance, the size where its sign
+  holds: over the cell, or over the poses that pass, where ``D_c - swing`` lies above ``-rho + sqrt(slack T) +
+  dev`` (a pose that passes with the other sign has it within that of ``-rho``); the search asks no more.
 
 A sensor whose contact point x is given (``located``) on a cylinder or a line with an axial interval [t0, t1]
 holds y in a slab whatever its rows: at a pose the verdict admits (:func:`.verdict.inadmissible`) x projects onto
@@ -166,11 +168,12 @@ class SensorBounds:
         counts = [3 if self.touches[k][0].sensor == self.touches[k][0].fixture else 2 for k in self.loci]
         self.row_touch = np.concatenate([np.repeat(np.array(self.loci, int), counts), self.crossings]).astype(int)
 
-    def cells(self, R, delta, yc, h):
+    def cells(self, R, delta, yc, h, root):
         """Over cells of rotations within ``delta`` (K,) rad of ``R`` (K, 3, 3) and images within ``h`` (K,) mm
         of ``yc`` (K, 3), fixture frame: the sum (K,) of the touches' cost bounds, and rows linear in the cell's
         turn omega (``R = R0 exp(omega)``) and image y whose squares sum to at most the touches' cost, off by at
-        most ``remainder`` each: (bound, value (K, s), Jw (K, s, 3), m (K, s, 3), remainder (K, s), usable,
+        most ``remainder`` each, at every pose of the cell whose cost passes ``root^2`` (the search's threshold,
+        before ``weight``): (bound, value (K, s), Jw (K, s, 3), m (K, s, 3), remainder (K, s), usable,
         twist (K, s, 6), radius (K, s)); a row is ``value + Jw.omega + m.y``, and on a printed part it changes
         by ``twist.(omega_f, v_f)`` as its touch's feature (``row_touch``) moves by that twist and by ``radius``
         per mm of its radius (module doc). A row whose model does not hold over a cell is zero there, and
@@ -178,7 +181,7 @@ class SensorBounds:
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             parts = [self._locus(*self.touches[k], self.printed[k], R, delta, yc, h) for k in self.loci]
             if self.crossings:
-                parts.append(self._lines(R, delta, yc, h))
+                parts.append(self._lines(R, delta, yc, h, root / np.sqrt(self.weight)))
         bound = self.weight * sum(np.where(np.isfinite(b), b, 0.0) for b, *_ in parts)
         value, Jw, m, remainder, usable, twist, radius = (np.concatenate([part[k] for part in parts], axis=1)
                                                           for k in range(1, 8))
@@ -354,9 +357,10 @@ class SensorBounds:
         fp, fd = self.pair_lines[2:]
         return fp + dot(a + yc[:, None] - fp, fd)[..., None] * fd
 
-    def _lines(self, R, delta, yc, h):
+    def _lines(self, R, delta, yc, h, limit):
         """The pairs of lines (a line or a cylinder's axis at ``rho`` from another): their bounds' sum (K,) and
-        their rows (K, s), as :meth:`cells` returns them."""
+        their rows (K, s), as :meth:`cells` returns them; ``limit``, the root of each touch's largest cost at a
+        pose that passes."""
         kappa = (delta**2 / 2.0 + delta**3 / 6.0)[:, None]
         dl, hl, rho = delta[:, None], h[:, None], self.pair_rho
         low, u, distance, a, du, arm, slack, dev, dev_rest = self._crossing(R, delta, yc, h)
@@ -370,8 +374,10 @@ class SensorBounds:
         twist = np.concatenate([cross(u, foot_f), -u], axis=2)
         bound = np.where(low > 0.0, np.maximum(least, 0.0) ** 2 / slack, 0.0)
         bound = np.sum(np.where(np.isfinite(bound), bound, 0.0), axis=1)
-        # With rho > 0 the unsigned distance is the signed one only where it keeps its sign over the cell.
-        usable = (low > 0.0) & ((rho == 0.0) | (distance > swing))
+        # With rho > 0 the unsigned distance is the signed one where it keeps its sign: over the cell, or over its
+        # poses that pass, where the other sign would put it within its reach of -rho (module doc).
+        reach = limit * np.sqrt(slack) + dev
+        usable = (low > 0.0) & ((rho == 0.0) | (distance > swing) | (distance + rho > swing + reach))
         scale = 1.0 / np.sqrt(slack)
         radius = np.where(self.pair_fixture_c, -1.0, 0.0)  # the distance holds its radius
         return bound, value * scale, cross(u, a) * scale[..., None], u * scale[..., None], remainder * scale, usable, \
