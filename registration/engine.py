@@ -53,7 +53,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     ----------
     features : dict id -> feature
     touches : dict id -> array-like, shape (n, 3), mm, measurement frame
-    initial_pose : array-like, shape (4, 4), optional nominal ``fixture2meas``
+    initial_pose : array-like, shape (4, 4), optional nominal ``fixture2meas``: the pose is refined from it alone,
+        unless the determined pose it leads to fails the test or leaves a touch off its patch (then every pose
+        is searched, as without it)
     sigma_mm : float, sensor placement noise (mm, each axis) for the chi-square test and covariance
     ball_radius_mm : float, radius of a ball tip (0 for a point probe); touches are ball centres
     contacts : list of dict, touches of other contact types (see ``contact_touch``)
@@ -107,20 +109,13 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     surfaces = (surface_features(features) if faces is None else list(faces.values())) if len(points) else []
     planned, features = features, {**features, **(faces or {})}
     holds = faces_holding(faces, planned) if faces and len(points) else {}
-    if len(points) and initial_pose is None:
-        solutions = solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm,
-                                     tolerance)
-        problem = solutions[0].problem
-    else:
-        # Near a nominal pose each unlabelled touch is on the feature it lies nearest to there.
-        assignment = nearest_assignment(surfaces, points, initial_pose, ball_radius_mm) if len(points) else ()
-        problem = assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
-                                   tolerance)
-        if not problem.groups:
-            raise ValueError("no touches given: every feature's list of touches is empty")
-        solutions = solve(problem, initial_pose)
-        for s in solutions:
-            s.assignment, s.problem = assignment, problem
+    given = (groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm, tolerance)
+    problem, solutions = _solved(*given, initial_pose)
+    if initial_pose is not None and solutions[0].rank == 6 and not solutions[0].good:
+        # The fit from the nominal pose fails the test or leaves a touch off its patch (a stale pose, or a minimum
+        # beside the true one): every pose is searched instead, as without one, and ``search`` says so.
+        initial_pose = None
+        problem, solutions = _solved(*given, None)
     best = solutions[0]
     result = {"flagged": [], "culprit": None, "fixture_flagged": [], "free_motions": [], "separating_touch": None}
     good = [s for s in solutions if s.good]
@@ -214,6 +209,24 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     if target_sigma is not None:
         result["target"] = _target(planned, best, problem.sigma, target_sigma, (s_t, s_r), candidates)
     return result
+
+
+def _solved(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm, tolerance, initial_pose):
+    """(problem, solutions): every pose that passes under some assignment of the unlabelled touches, or, from a
+    nominal pose, each unlabelled touch on the feature it lies nearest to there and the pose refined from it."""
+    if len(points) and initial_pose is None:
+        solutions = solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm,
+                                     tolerance)
+        return solutions[0].problem, solutions
+    assignment = nearest_assignment(surfaces, points, initial_pose, ball_radius_mm) if len(points) else ()
+    problem = assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
+                               tolerance)
+    if not problem.groups:
+        raise ValueError("no touches given: every feature's list of touches is empty")
+    solutions = solve(problem, initial_pose)
+    for s in solutions:
+        s.assignment, s.problem = assignment, problem
+    return problem, solutions
 
 
 def _missed(problem, explained):

@@ -125,6 +125,28 @@ def test_noise_free_touches_on_the_analytic_surfaces_give_the_pose(name, plan):
         assert dt < 1e-6 and dr < 1e-6
 
 
+@pytest.mark.parametrize("name", sorted(templates.TEMPLATES))
+def test_a_nominal_pose_that_leads_nowhere_gives_way_to_the_complete_search(name):
+    """The default plan's exact touches from a nominal pose 30, 120 and 150 degrees off: from 30 the pose refined
+    from it (``search: nominal``); from the others, where the fit falls short of the truth (the cube, v-block,
+    quarter-sphere and inclined plane said ``inconsistent`` before the fallback), every pose is searched, and the
+    answer is the truth, ``unique``, ``search: complete``."""
+    features, entries = _plan(name, "default")
+    rng = np.random.default_rng(1)
+    truth = _random_pose(rng)
+    touches, contacts = plan_touches(entries, truth)
+    searched = 0
+    for degrees in (30.0, 120.0, 150.0):
+        twist = np.concatenate([np.radians(degrees) * np.array([0.6, 0.0, 0.8]), [3.0, 4.0, 0.0]])
+        nominal = fixture2meas_from_rt(*apply_twist(truth[:3, :3], truth[:3, 3], twist))
+        result = register_touches(features, touches, nominal, contacts=contacts)
+        assert result["status"] == "unique", (degrees, result["status"])
+        assert max(pose_errors(np.array(result["pose"]), truth)) < 1e-6
+        assert result["search"] == "nominal" or degrees > 30.0
+        searched += result["search"] == "complete"
+    assert searched >= 1
+
+
 def test_ball_tip_touches_are_ball_centres():
     features, entries = _plan("quarter-sphere", "point-probe")
     rng = np.random.default_rng(4)
