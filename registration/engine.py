@@ -53,9 +53,10 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     ----------
     features : dict id -> feature
     touches : dict id -> array-like, shape (n, 3), mm, measurement frame
-    initial_pose : array-like, shape (4, 4), optional nominal ``fixture2meas``: the pose is refined from it alone,
-        unless the determined pose it leads to fails the test or leaves a touch off its patch (then every pose
-        is searched, as without it)
+    initial_pose : array-like, shape (4, 4), optional nominal ``fixture2meas``: the pose is refined from it alone
+        (unlabelled touches each on its nearest feature there, then at the pose refined, while that changes),
+        unless the determined pose it leads to fails the test or leaves a touch off its patch (then every pose is
+        searched, as without it)
     sigma_mm : float, sensor placement noise (mm, each axis) for the chi-square test and covariance
     ball_radius_mm : float, radius of a ball tip (0 for a point probe); touches are ball centres
     contacts : list of dict, touches of other contact types (see ``contact_touch``)
@@ -211,6 +212,9 @@ def register_touches(features, touches, initial_pose=None, sigma_mm=DEFAULT_SIGM
     return result
 
 
+REASSIGN_ROUNDS = 4  # fits from a nominal pose, each unlabelled touch on its nearest feature at the last one's pose
+
+
 def _solved(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm, tolerance, initial_pose):
     """(problem, solutions): every pose that passes under some assignment of the unlabelled touches, or, from a
     nominal pose, each unlabelled touch on the feature it lies nearest to there and the pose refined from it."""
@@ -219,14 +223,26 @@ def _solved(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm,
                                      tolerance)
         return solutions[0].problem, solutions
     assignment = nearest_assignment(surfaces, points, initial_pose, ball_radius_mm) if len(points) else ()
-    problem = assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
-                               tolerance)
-    if not problem.groups:
-        raise ValueError("no touches given: every feature's list of touches is empty")
-    solutions = solve(problem, initial_pose)
-    for s in solutions:
-        s.assignment, s.problem = assignment, problem
-    return problem, solutions
+    first = None
+    for _ in range(REASSIGN_ROUNDS):
+        problem = assigned_problem(groups, features, points, index, assignment, ball_radius_mm, sigma_mm, lever_mm,
+                                   tolerance)
+        if not problem.groups:
+            raise ValueError("no touches given: every feature's list of touches is empty")
+        solutions = solve(problem, initial_pose)
+        for s in solutions:
+            s.assignment, s.problem = assignment, problem
+        first = first or (problem, solutions)
+        if solutions[0].good or not len(points):
+            return problem, solutions
+        # A touch put on the wrong feature at a nominal pose off by a few degrees pulls the fit away: each is put
+        # on its nearest again at the pose refined, while that changes (ICP's step); kept only where a fit passes.
+        initial_pose = solutions[0].fixture2meas
+        again = nearest_assignment(surfaces, points, initial_pose, ball_radius_mm)
+        if again == assignment:
+            break
+        assignment = again
+    return first
 
 
 def _missed(problem, explained):
