@@ -217,7 +217,8 @@ REASSIGN_ROUNDS = 4  # fits from a nominal pose, each unlabelled touch on its ne
 
 def _solved(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm, tolerance, initial_pose):
     """(problem, solutions): every pose that passes under some assignment of the unlabelled touches, or, from a
-    nominal pose, each unlabelled touch on the feature it lies nearest to there and the pose refined from it."""
+    nominal pose, the pose refined from it, each unlabelled touch on the feature it lies nearest to there and then
+    at the pose refined, while that changes (the first fit's where none passes)."""
     if len(points) and initial_pose is None:
         solutions = solve_unlabelled(groups, features, surfaces, points, index, ball_radius_mm, sigma_mm, lever_mm,
                                      tolerance)
