@@ -92,10 +92,17 @@ def element(name: str) -> Element:
                          f"or {', '.join(KINDS)}") from None
 
 
+_LEVI_CIVITA = np.zeros((3, 3, 3))
+_LEVI_CIVITA[[0, 1, 2], [1, 2, 0], [2, 0, 1]], _LEVI_CIVITA[[0, 2, 1], [2, 1, 0], [1, 0, 2]] = 1.0, -1.0
+SMALL_CROSS = 200  # numbers in both operands up to which one einsum beats the nine ufunc calls
+
+
 def cross(a, b):
     """The cross product of vectors along the last axis, broadcast: ``np.cross`` without its axis handling,
     which costs more than the product on the small arrays of the search."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.size + b.size <= SMALL_CROSS:  # a few touches: numpy's per-call cost is all there is
+        return np.einsum("ijk,...j,...k->...i", _LEVI_CIVITA, a, b)
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))  # filled in place: cheaper than stacking the parts
     np.subtract(a[..., 1] * b[..., 2], a[..., 2] * b[..., 1], out=out[..., 0])
     np.subtract(a[..., 2] * b[..., 0], a[..., 0] * b[..., 2], out=out[..., 1])
@@ -139,11 +146,12 @@ def distance_and_outward(core: str, anchor, direction, radius, points):
         return np.einsum("...i,...i->...", points - anchor, direction) - radius, direction
     offset = core_offset(core, anchor, direction, points)
     length = np.sqrt(np.einsum("...i,...i->...", offset, offset))
+    if length.min(initial=np.inf) >= 1e-12:  # (no point on the core: the usual case, without errstate's cost)
+        return length - radius, offset / length[..., None]
     with np.errstate(divide="ignore", invalid="ignore"):
         unit = offset / length[..., None]
-    if not length.min(initial=np.inf) >= 1e-12:
-        fallback = perpendicular_basis(direction)[0] if core == "line" else np.array([0.0, 0.0, 1.0])
-        unit = np.where((length < 1e-12)[..., None], np.broadcast_to(fallback, unit.shape), unit)
+    fallback = perpendicular_basis(direction)[0] if core == "line" else np.array([0.0, 0.0, 1.0])
+    unit = np.where((length < 1e-12)[..., None], np.broadcast_to(fallback, unit.shape), unit)
     return length - radius, unit
 
 

@@ -30,12 +30,14 @@ def redundancy(problem, solution) -> dict:
         return out
     # Leverage from an orthonormal basis of the column space: stable where (J^T J)^-1 is not.
     basis = np.linalg.svd(J, full_matrices=False)[0][:, :6]
-    leverage = np.sum(basis**2, axis=1)
-    for touch in dict.fromkeys(int(k) for k in touches):
-        rows = touches == touch
-        r = float(np.clip(1.0 - leverage[rows].max(), 0.0, 1.0))
-        if r < UNCHECKED_REDUNDANCY:
-            out["unchecked"].append(touch)
-        else:
-            out["detectable_mm"][touch] = DETECTION_FACTOR * problem.sigma / np.sqrt(r)
+    # Each touch's largest leverage over its rows, the touches in the rows' order.
+    largest = np.full(len(out["detectable_mm"]), -np.inf)
+    np.maximum.at(largest, touches, np.sum(basis**2, axis=1))
+    index, first = np.unique(touches, return_index=True)
+    order = index[np.argsort(first)]
+    r = np.clip(1.0 - largest[order], 0.0, 1.0)
+    checked = r >= UNCHECKED_REDUNDANCY
+    out["unchecked"] = order[~checked].tolist()
+    for touch, mm in zip(order[checked].tolist(), (DETECTION_FACTOR * problem.sigma / np.sqrt(r[checked])).tolist()):
+        out["detectable_mm"][touch] = mm
     return out

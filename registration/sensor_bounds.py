@@ -106,7 +106,8 @@ class Printed:
     def at(self, p, reach=0.0):
         """The largest move (K,) mm of the feature at points p (K, 3), or anywhere within ``reach`` (K,) of them
         (of each stacked feature at its own points, (K, s))."""
-        far = np.sqrt(dot(p - self.centre, p - self.centre)) + reach
+        off = p - self.centre
+        far = np.sqrt(dot(off, off)) + reach
         return self.dev + np.where(self.tilt > 0.0, self.tilt * far, 0.0)
 
 
