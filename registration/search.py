@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .elements import cross, distance_and_outward, perpendicular_basis
+from .elements import cross, distance_and_outward, dot, perpendicular_basis
 from .least_squares import STEP_TOLERANCE, levenberg_marquardt, step_moves
 from .mobility import matrix_rank
 from .patches import patch_box
@@ -187,34 +187,47 @@ def first_cells():
     return v, np.full(len(v), w), np.full((len(v), 3), -np.inf), np.full((len(v), 3), np.inf)
 
 
-def measured_normal(points, reach):
-    """A plane's normal in the measurement frame from three touches or more (n, 3) on it, each within ``reach``
-    (n,) mm of the plane, whatever the pose: ``(n*, phi)``, every unit n with ``|n.(p_i - p_j)| <= r_i + r_j``
-    for every pair lying within phi of +n* or -n*; None where the touches leave it open.
+def measured_normals(points, reach, mask):
+    """Planes' normals in the measurement frame, each from a set of three touches or more (G, n, 3) (``mask``
+    (G, n): the set's), each within ``reach`` (G, n) mm of its plane, whatever the pose: ``(n*, phi)`` (G, 3),
+    (G,), every unit n with ``|n.(p_i - p_j)| <= r_i + r_j`` for every pair lying within phi of +n* or -n*; phi
+    nan where the touches leave it open.
 
     First :func:`normal_cones`' bound. Tighter, pair by pair: such an n on n*'s side is ``(n* + u) /
     |n* + u|`` with u across n* and ``|n* + u| = 1 / (n.n*) <= 1 / cos(phi)``, so every pair's ``|(n* +
     u).d| <= (r_i + r_j) / cos(phi)``: u lies in a polygon (the pairs' slabs), within its farthest vertex's
-    ``|u| = tan`` of n's angle from n*."""
-    n, phi = normal_cones(points[None], reach[None], np.ones((1, len(points)), bool))
-    if np.isnan(phi[0]):
-        return None
-    n, phi = n[0], float(phi[0])
-    i, j = pair_indices(len(points))
-    d = (points[j] - points[i]) / (reach[i] + reach[j])[:, None]
-    # The slabs' edges a.u = b (both sides of each pair's), their corners where two meet, the corners in every slab.
-    along, across = d @ n, d @ np.column_stack(perpendicular_basis(n))
-    a = np.concatenate([across, across])
-    b = np.concatenate([np.ones(len(d)), -np.ones(len(d))]) / np.cos(phi) - np.concatenate([along, along])
-    k, m = pair_indices(len(a))
-    det = a[k, 0] * a[m, 1] - a[k, 1] * a[m, 0]
+    ``|u| = tan`` of n's angle from n*. (All sets at once: numpy's cost is per call on a few touches.)"""
+    n, phi = normal_cones(points, reach, mask)
+    i, j = pair_indices(points.shape[1])
+    both = mask[:, i] & mask[:, j]
+    d = np.where(both[..., None], (points[:, j] - points[:, i]) / (reach[:, i] + reach[:, j])[..., None], 0.0)
+    # The slabs' edges a.u = b (both sides of each pair's), their corners where two meet, the corners in every slab;
+    # a pair not in the set has no edge (a = 0 meets nothing) and holds every u (0 <= 1 / cos(phi)).
+    e1, e2 = perpendicular_basis(n)
+    along, across = dot(d, n[:, None]), np.stack([dot(d, e1[:, None]), dot(d, e2[:, None])], axis=-1)
+    wall = 1.0 / np.cos(np.where(np.isnan(phi), 0.0, phi))
+    a = np.concatenate([across, across], axis=1)
+    b = np.concatenate([wall[:, None] - along, -wall[:, None] - along], axis=1)
+    k, m = pair_indices(a.shape[1])
+    det = a[:, k, 0] * a[:, m, 1] - a[:, k, 1] * a[:, m, 0]
     meet = np.abs(det) > 1e-12
-    k, m, det = k[meet], m[meet], det[meet]
-    corners = np.column_stack([b[k] * a[m, 1] - b[m] * a[k, 1], a[k, 0] * b[m] - a[m, 0] * b[k]]) / det[:, None]
-    inside = np.all(np.abs(along + corners @ across.T) <= (1.0 + 1e-7) / np.cos(phi), axis=1)
-    if inside.any():
-        phi = min(phi, float(np.arctan(np.linalg.norm(corners[inside], axis=1).max())))
-    return n, phi
+    det = np.where(meet, det, 1.0)
+    corners = np.stack([b[:, k] * a[:, m, 1] - b[:, m] * a[:, k, 1], a[:, k, 0] * b[:, m] - a[:, m, 0] * b[:, k]],
+                       axis=-1) / det[..., None]
+    inside = meet & np.all(np.abs(along[:, None] + corners @ across.transpose(0, 2, 1))
+                           <= (1.0 + 1e-7) * wall[:, None, None], axis=2)
+    farthest = np.where(inside, np.linalg.norm(corners, axis=2), -np.inf).max(axis=1, initial=-np.inf)
+    return n, np.where(farthest >= 0.0, np.minimum(phi, np.arctan(np.maximum(farthest, 0.0))), phi)
+
+
+def _padded(sets):
+    """Sets of touches and their reach ((n_g, 3), (n_g,)) as arrays (G, n, 3), (G, n) and their mask (G, n)."""
+    widest = max(len(points) for points, _ in sets)
+    mask = np.array([np.arange(widest) < len(points) for points, _ in sets])
+    points, reach = np.zeros(mask.shape + (3,)), np.ones(mask.shape)
+    for g, (p, r) in enumerate(sets):
+        points[g, :len(p)], reach[g, :len(p)] = p, r
+    return points, reach, mask
 
 
 def normal_cones(points, reach, mask):
@@ -284,7 +297,7 @@ def rotation_boxes(R, theta):
 
 def normal_signs(normal, plane, level, others, heights):
     """The signs s for which a turn can take a plane's fixture normal f to within phi of ``s n*`` (``normal``: (f,
-    n*, phi), :func:`measured_normal`) with the plane's touches ``plane`` (n, 3) and every other touch ``others``
+    n*, phi), :func:`measured_normals`) with the plane's touches ``plane`` (n, 3) and every other touch ``others``
     (m, 3) where they may lie: ``level`` (lo, hi), mm, holds ``f.x`` of the plane's touches' centroid in the
     fixture frame, and ``heights`` (m, 2) that of each other touch (its grown patch box's range along f). A turn
     R puts the other touch at ``x = R^T (p - t)``, whose height ``f.x = (R f).(p - c) + f.x_c`` (c the centroid),
@@ -300,7 +313,7 @@ def normal_signs(normal, plane, level, others, heights):
 def tube_turns(normal, pairs, most=TUBE_BOXES):
     """Rotation boxes (v (k, 3), half-widths (k,), rad) that hold a rotation vector of every turn that moves a
     plane's fixture normal f to within phi of its measured normal n* with one of its signs (``normal``: (f, n*,
-    phi, signs), :func:`measured_normal`, :func:`normal_signs`) and keeps each pair of touches as its element
+    phi, signs), :func:`measured_normals`, :func:`normal_signs`) and keeps each pair of touches as its element
     keeps them (``pairs``, :func:`tube_pairs`: a fixture direction f_b (m, 3), the touches' difference d (m, 3),
     and bounds on ``|(R f_b).d|`` (m,), mm: at most ``upper`` for two touches on a plane, f_b its normal; at
     least ``lower`` for two on a line or cylinder, f_b its axis).
@@ -375,7 +388,7 @@ def first_turns(centres, normals, pairs=((), (), (), ()), most=FIRST_TURN_PLANES
 
     ``centres``: :class:`Tree`'s (fixture centre, box middle off the centroid, half-widths): a turn that puts
     each centre in its box moves each difference of two centres ``u`` to within ``|h_i + h_j|`` of its boxes'
-    middles' difference. ``normals``: (fixture normal, measured normal n*, phi, signs) (:func:`measured_normal`,
+    middles' difference. ``normals``: (fixture normal, measured normal n*, phi, signs) (:func:`measured_normals`,
     :func:`normal_signs`): the turn moves the fixture normal to within ``2 sin(phi/2)`` of s n*, s one of its
     signs; each choice of signs gives its own turns, and a choice is dropped where no turn can make it: two
     normals' angle is kept by a turn (within ``phi_k + phi_l``), and three normals' triple product (within the
@@ -613,26 +626,33 @@ class Tree:
     def normals(self):
         """Each plane touched three times or more, its normal in the measurement frame where its touches put it,
         whatever the pose, up to its sign, and the signs the other touches leave: (fixture normal, measured
-        normal, phi, signs) (:func:`measured_normal`, :func:`normal_signs`); and each plane sensor lying on a
+        normal, phi, signs) (:func:`measured_normals`, :func:`normal_signs`); and each plane sensor lying on a
         plane, the sensor's normal, either sign."""
         out = []
-        for f, points, reach, idx in self.planes:
-            normal = measured_normal(points, reach) if len(points) >= 3 else None
-            if len(points) >= 3 and self.L is not None and self.radius_own[idx].all():
-                # A printed plane's modes move it as a whole: its touches lie within sqrt(T) of a plane whose
-                # normal is within its largest turn of the drawn one's (:meth:`modes`).
-                tight = measured_normal(points, np.full(len(idx), self.root))
-                if tight is not None and (normal is None or tight[1] + self.tilt[idx[0]] < normal[1]):
-                    normal = tight[0], tight[1] + self.tilt[idx[0]]
-            if normal is None:
+        planes = [plane for plane in self.planes if len(plane[3]) >= 3]
+        # A printed plane's modes move it as a whole: its touches lie within sqrt(T) of a plane whose normal is
+        # within its largest turn of the drawn one's (:meth:`modes`); both bounds for all planes in one call.
+        tight = [self.L is not None and self.radius_own[idx].all() for *_, idx in planes]
+        sets = [(points, reach) for _, points, reach, _ in planes]
+        sets += [(points, np.full(len(idx), self.root)) for (_, points, _, idx), t in zip(planes, tight) if t]
+        measured, phis = measured_normals(*_padded(sets)) if sets else (None, None)
+        shifted = iter(range(len(planes), len(sets)))
+        for g, ((f, points, reach, idx), t) in enumerate(zip(planes, tight)):
+            normal, phi = measured[g], phis[g]
+            if t:
+                h = next(shifted)
+                if not np.isnan(phis[h]) and (np.isnan(phi) or phis[h] + self.tilt[idx[0]] < phi):
+                    normal, phi = measured[h], phis[h] + self.tilt[idx[0]]
+            if np.isnan(phi):
                 continue
+            normal = f, normal, float(phi)
             others = np.setdiff1d(np.arange(len(self.points)), idx)
             # Each other touch's grown patch box along f (an unbounded one's: everywhere).
             middle = self.patch_middle[others] @ f
             half = np.where(self.bounded[others], 0.5 * self.patch_width[others] @ np.abs(f), np.inf)
             heights = np.column_stack([middle - half, middle + half])
             level = f @ self.flat_anchor[idx[0]] + np.array([-1.0, 1.0]) * reach.mean()
-            out.append((f, *normal, normal_signs((f, *normal), points, level, self.points[others], heights)))
+            out.append((*normal, normal_signs(normal, points, level, self.points[others], heights)))
         if self.sensors is not None:
             # Its turn rows alone keep R f within phi of the sensor's normal: L (sin(phi) - tilt) <= sqrt(T)
             # (:mod:`.sensor_bounds`, the rows that only turn).
@@ -671,7 +691,9 @@ class Tree:
         with np.errstate(invalid="ignore"):  # an unbounded patch's box has no middle: 0 there
             middle = np.mean([np.mean(patch_box(g.feature), axis=0) for g in groups], axis=0)
         middle = np.where(np.isfinite(middle), middle, 0.0)
-        return any(matrix_rank(self.full.evaluate(R, self.centroid - R @ middle)[1], self.full.scale()) == 6
+        # The rows before a printed part's whitening, an invertible map (C^-1/2's eigenvalues lie in (0, 1] and
+        # far above the rank's threshold): the same rank, without the modes' cost.
+        return any(matrix_rank(self.full.sensor_rows(R, self.centroid - R @ middle)[1], self.full.scale()) == 6
                    for R in rotation_from_vector(RANK_ROTATIONS))
 
     def modes(self, groups, tolerance, q, stand_ins, sensors):
@@ -1128,7 +1150,8 @@ class Tree:
                 Jz = np.concatenate([Jz, change], axis=1)
             # u eliminated exactly: min over u of |v - Jz u|^2 + sigma^2 |u|^2 (:func:`_modes_eliminated`), the
             # model's least and its ellipsoid's shadow on (omega, y) as with u among the unknowns.
-            gram = gram - _modes_eliminated(Jz, self.problem.sigma, columns)
+            eliminated, U, JzU = _modes_eliminated(Jz, self.problem.sigma, columns)
+            gram = gram - eliminated
         # The rows' error is a flat touch's turn vector plus each row's own: its length at most the root of the
         # squares of each flat touch's kappa plus its rows' own (their root) and of every other row's own.
         flat_kappa = kappa[:, self.flat]
@@ -1167,10 +1190,11 @@ class Tree:
         omega = -np.einsum("kij,kj->ki", c.V,
                            np.where(shifted > 0.0, beta / np.where(shifted > 0.0, shifted, 1.0), 0.0))
         y = -np.einsum("kij,kj->ki", c.H_pinv, gram[:, 4:, 0] + np.einsum("kij,ki->kj", gram[:, 1:4, 4:], omega))
-        rows = np.einsum("krj,kj->kr", columns, np.concatenate([np.ones((K, 1)), omega, y], axis=1))
+        x = np.concatenate([np.ones((K, 1)), omega, y], axis=1)
+        rows = np.einsum("krj,kj->kr", columns, x)
         modes = np.zeros(K)
         if self.L is not None:
-            rows, modes = _modes_left(Jz, self.problem.sigma, rows)
+            rows, modes = _modes_left(U, JzU, self.problem.sigma, rows, x)
         c.dual = dual_bound(columns, rows, modes, c.delta, box_middle(c.ylo, c.yhi), 0.5 * (c.yhi - c.ylo), self.Q,
                             row_off, flat_kappa, self.flat_sizes(rows))
 
@@ -1761,8 +1785,11 @@ def _modes_least(Jz, sigma, v):
 def _modes_eliminated(Jz, sigma, columns):
     """What eliminating the modes u takes off the Gram matrix of the rows' ``columns`` (K, r, c): ``B^T C^-1 B``
     (K, c, c), ``B = Jz^T columns`` (:func:`_modes_least`), so that a combination v of the columns costs ``|v|^2 -
-    v^T Jz C^-1 Jz^T v = min over u of |v - Jz u|^2 + sigma^2 |u|^2``."""
-    return columns.transpose(0, 2, 1) @ Jz @ _modes_least(Jz, sigma, columns)
+    v^T Jz C^-1 Jz^T v = min over u of |v - Jz u|^2 + sigma^2 |u|^2``; and ``U = C^-1 B`` (K, k, c) and ``Jz U``
+    (K, r, c): the least u of ``v = columns x`` is ``U x`` (:func:`_modes_left`)."""
+    U = _modes_least(Jz, sigma, columns)
+    JzU = Jz @ U
+    return columns.transpose(0, 2, 1) @ JzU, U, JzU
 
 
 def _bend(move, s0):
@@ -1772,11 +1799,12 @@ def _bend(move, s0):
     return np.where(move <= 2.0 * s0, move**2 / (2.0 * s0), 2.0 * (move - s0))
 
 
-def _modes_left(Jz, sigma, v):
-    """Rows v (K, r) less the modes' part at the least over u of ``|v - Jz u|^2 + sigma^2 |u|^2``
-    (:func:`_modes_least`), and that least's ``sigma^2 |u|^2`` (K,)."""
-    u = _modes_least(Jz, sigma, v[..., None])[..., 0]
-    return v - np.einsum("krj,kj->kr", Jz, u), sigma**2 * np.sum(u**2, axis=1)
+def _modes_left(U, JzU, sigma, v, x):
+    """Rows ``v = columns x`` (K, r) less the modes' part at the least over u of ``|v - Jz u|^2 + sigma^2 |u|^2``,
+    and that least's ``sigma^2 |u|^2`` (K,): u is ``U x`` (``U``, ``JzU``: :func:`_modes_eliminated`'s; the least
+    is linear in v, so no system is solved again)."""
+    u = np.einsum("kjc,kc->kj", U, x)
+    return v - np.einsum("krc,kc->kr", JzU, x), sigma**2 * np.sum(u**2, axis=1)
 
 
 def dual_bound(columns, rows, modes, delta, middle, half, Q, row_off, kappa, kappa_size):

@@ -19,7 +19,7 @@ from fixturecad.registration.patches import patch_points
 from fixturecad.registration.pose import random_rotation, rotation_angle, rotation_from_vector, vector_from_rotation
 from fixturecad.registration.problem import Problem
 from fixturecad.registration.search import (CLOSER_ROUNDS, TUBE_BOXES, Cells, Tree, _joined, _modes_eliminated, _modes_left,
-                                            across_rows, dual_bound, first_turns, largest_swing, measured_normal, missed, normal_cones,
+                                            across_rows, dual_bound, first_turns, largest_swing, measured_normals, missed, normal_cones,
                                             normal_signs, propagated, rotation_boxes, row_span, search, shell_box,
                                             stand_in_tree, threshold_mm2, tube_pairs)
 from fixturecad.registration.synthetic import perturb_touches, plan_touches
@@ -44,6 +44,19 @@ BOSSES = {f.id: f for f in (
     Cylinder("boss_c", (10.0, 45.0, 0.0), np.array([0.0, -0.5, 1.0]) / np.sqrt(1.25), 5.0, Extent(interval=(0, 25))))}
 IDS = [f"{name}{'' if counts is None else ' ' + '-'.join(map(str, counts.values()))}"
        f"{f' ball {ball:g} mm' if ball else ''}" for name, counts, ball in CASES]
+
+
+def _measured_normal(points, reach):
+    """One plane's :func:`measured_normals` (n*, phi), None where its touches leave it open; asked in a batch
+    after another set of touches, with two touches of its own masked out, as the search asks (a batch that mixed
+    its sets, or a mask that let a touch in, would move phi)."""
+    rng = np.random.default_rng(len(points))
+    other = rng.normal(0.0, 20.0, (len(points) + 2, 3))
+    padded = np.concatenate([points, rng.normal(0.0, 20.0, (2, 3))])
+    mask = np.array([np.ones(len(padded), bool), np.arange(len(padded)) < len(points)])
+    n, phi = measured_normals(np.stack([other, padded]), np.array([np.full(len(padded), 0.5),
+                                                                      np.append(reach, [0.01, 0.01])]), mask)
+    return None if np.isnan(phi[1]) else (n[1], float(phi[1]))
 
 
 def _layout(name, counts, rng, ball=0.0, printed=None):
@@ -479,7 +492,7 @@ def test_the_normals_turns_hold_every_turn_that_keeps_each_plane_s_touches_on_it
         normals, groups = [], []
         for _ in range(count):
             f, points, reach = _plane_layout(rng, rng.integers(3, 6), R, t, rng.uniform(-20, 20))
-            normal = measured_normal(points, reach)
+            normal = _measured_normal(points, reach)
             if normal is not None:
                 normals.append((f, *normal, (1.0, -1.0)))
                 groups.append((f, points, reach))
@@ -551,7 +564,7 @@ def test_the_tube_about_one_normal_holds_every_turn_that_keeps_each_plane_s_touc
             local = rng.uniform(-30, 30, 3) + along[:, None] * a + (radius + rng.uniform(-1, 1, n) * reach)[:, None] * (
                 np.cos(angle)[:, None] * e1 + np.sin(angle)[:, None] * e2)
             lines.append((a, local @ R.T + t, radius + reach))
-        normal = measured_normal(groups[0][1], groups[0][2])
+        normal = _measured_normal(groups[0][1], groups[0][2])
         if normal is None:
             continue
         turn = first_turns([], [(groups[0][0], *normal, (1.0, -1.0))], tube_pairs(groups, lines))
@@ -581,7 +594,7 @@ def test_a_plane_s_measured_normal_holds_every_normal_that_fits_its_touches():
     """200 layouts of a plane touched three to eight times over 10-40 mm, each touch within 0.01-3 mm of it: of
     20,000 unit normals drawn within the eigenvalue bound's angle (times 1.2) of n* (half of them near its edge),
     every one under which each pair of touches fits within their reaches (``|n.d| <= r_i + r_j``) lies within
-    :func:`measured_normal`'s phi of n*, and in most layouts one lies beyond 0.9 phi (phi is about the farthest
+    :func:`measured_normals`' phi of n*, and in most layouts one lies beyond 0.9 phi (phi is about the farthest
     such normal, tighter than the eigenvalue bound). It fails when the slabs' 1/cos(phi) is left out, or phi is
     taken 3 % narrower. :func:`normal_cones`, the touches among three others it masks out, gives the eigenvalue
     bound itself."""
@@ -591,7 +604,7 @@ def test_a_plane_s_measured_normal_holds_every_normal_that_fits_its_touches():
         count, size = rng.integers(3, 9), rng.uniform(10, 40)
         reach = np.exp(rng.uniform(np.log(0.01), np.log(3.0), count))
         _, points, reach = _plane_layout(rng, count, np.eye(3), np.zeros(3), size=size, reach=reach)
-        normal = measured_normal(points, reach)
+        normal = _measured_normal(points, reach)
         if normal is None:
             continue
         n, phi = normal
@@ -631,7 +644,7 @@ def test_a_plane_s_measured_normal_keeps_every_sign_a_turn_that_passes_gives_it(
         R, t = random_rotation(rng), rng.uniform(-50, 50, 3)
         c = rng.uniform(-20, 20)
         f, plane, reach = _plane_layout(rng, rng.integers(3, 6), R, t, c)
-        normal = measured_normal(plane, reach)
+        normal = _measured_normal(plane, reach)
         if normal is None:
             continue
         m = rng.integers(2, 5)
@@ -1166,12 +1179,13 @@ def test_a_round_touchs_turning_deviation_bounds_its_features_move(name, counts)
 def test_eliminating_the_modes_leaves_each_combination_its_least_cost_over_them(rows, modes):
     """Either system :func:`_modes_eliminated` solves (k by k under many rows, r by r for a few sensors' rows on
     many modes) leaves v^T (G - E) v the least over u of ``|Jz u - v|^2 + sigma^2 |u|^2``, found here by least
-    squares on the stacked system, for random combinations v of the columns; one mode almost unseen."""
+    squares on the stacked system, for random combinations v of the columns; one mode almost unseen. :func:`_modes_left`
+    gives each combination's rows less its least modes' part, and their cost."""
     rng = np.random.default_rng(rows)
     Jz = rng.normal(size=(3, rows, modes))
     Jz[:, :, 0] *= 1e-6
     columns, sigma = rng.normal(size=(3, rows, 7)), 0.005
-    eliminated = _modes_eliminated(Jz, sigma, columns)
+    eliminated, U, JzU = _modes_eliminated(Jz, sigma, columns)
     for k in range(3):
         for x in rng.normal(size=(4, 7)):
             v = columns[k] @ x
@@ -1179,7 +1193,7 @@ def test_eliminating_the_modes_leaves_each_combination_its_least_cost_over_them(
                                 rcond=None)[0]
             least = np.sum((Jz[k] @ u - v) ** 2) + sigma**2 * u @ u
             assert x @ (columns[k].T @ columns[k] - eliminated[k]) @ x == pytest.approx(least, rel=1e-6, abs=1e-12)
-            left, penalty = _modes_left(Jz[k:k + 1], sigma, v[None])
+            left, penalty = _modes_left(U[k:k + 1], JzU[k:k + 1], sigma, v[None], x[None])
             assert left[0] == pytest.approx(v - Jz[k] @ u, rel=1e-6, abs=1e-9)
             assert penalty[0] == pytest.approx(sigma**2 * u @ u, rel=1e-6, abs=1e-12)
 
