@@ -168,10 +168,13 @@ class FixtureTolerance:
         """The printed part's datum frame in the nominal frame (4, 4), see :func:`.datums.frame_change`."""
         return frame_change(self.scheme, self.features, self.part(deviations))
 
-    def printed_entry(self, entry, deviations):
-        """A touch-plan entry (fixture frame) made on the printed part instead of the model (:func:`entry_on`)."""
-        fid = entry["feature"]
-        return entry_on(entry, self.modes[fid], deviations[fid])
+    def printed_plan(self, entries, deviations):
+        """Touch-plan entries (fixture frame) made on the printed part of given mode coordinates instead of the
+        model (:func:`entry_on`), the part (:meth:`part`) and its datum frame in the nominal frame (4, 4)
+        (:func:`.datums.frame_change`): each feature deviated once, however many entries touch it."""
+        part = self.part(deviations)
+        entries = [entry_on(e, self.modes[e["feature"]], deviations[e["feature"]], part[e["feature"]]) for e in entries]
+        return entries, part, frame_change(self.scheme, self.features, part)
 
     def twists_at(self, rotation, translation):
         """Every mode's twist (size, 6) mapped into the measurement frame at a pose.
@@ -261,14 +264,15 @@ def tolerance_from_document(features, document, zone_mm=None):
     return FixtureTolerance(features, scheme, zone) if zone > 0 or calibration is not None else None
 
 
-def entry_on(entry, mode_set, coordinates):
-    """A touch-plan entry (fixture frame) on ``mode_set``'s feature deviated by ``coordinates``.
+def entry_on(entry, mode_set, coordinates, printed=None):
+    """A touch-plan entry (fixture frame) on ``mode_set``'s feature deviated by ``coordinates`` (``printed``:
+    that feature, :func:`.tolerance.deviated`, where the caller has it).
 
     Point touches go to the nearest point of the deviated surface; a sensor
     moves with its feature, and off a grown sphere or cylinder.
     """
     c = np.asarray(coordinates, float)
-    printed = deviated(mode_set, c)
+    printed = deviated(mode_set, c) if printed is None else printed
     points = np.asarray(entry["points"], float).reshape(-1, 3)
     if "sensor" not in entry:
         return {**entry, "points": printed.closest_point(points).tolist()}

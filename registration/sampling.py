@@ -17,7 +17,7 @@ from .deviations import entry_on
 from .elements import cross, element
 from .features import faces_from_json, feature_from_json
 from .reach import reachable
-from .tolerance import coordinates, deviated, modes
+from .tolerance import coordinates, modes
 from .pose import fixture2meas_from_rt, random_rotation
 
 VERTEX_ON_SURFACE_MM = 1e-3  # a feature's triangles have all three vertices this close to it
@@ -210,13 +210,13 @@ class TouchSampler:
         return [e for e in self.entries if "sensor" in e] + [
             {"feature": faces[k].id, "points": points[on == k].tolist()} for k in np.unique(on)]
 
-    def _centres(self, entry, printed):
+    def _centres(self, entry, part):
         """A ball tip's entry with its centres: its radius out from the touched points, along the normal of
-        the feature touched (as printed, when it is)."""
+        the feature touched (of the printed ``part``'s, when it is printed)."""
         if "sensor" in entry:
             return entry
         fid = entry["feature"]
-        feature = self.features[fid] if printed is None else deviated(self.tolerance.modes[fid], printed[fid])
+        feature = self.features[fid] if part is None else part[fid]
         points = np.asarray(entry["points"], float)
         return {**entry, "points": (points + self.ball_radius_mm * feature.normal_at(points)).tolist()}
 
@@ -234,12 +234,12 @@ class TouchSampler:
                 random_rotation(rng), rng.uniform(-POSE_TRANSLATION_RANGE_MM, POSE_TRANSLATION_RANGE_MM, 3)
             )
         entries = self.fixture_entries(rng)
-        truth = fixture2meas
+        truth, part = fixture2meas, None
         if printed is not None:
-            entries = [self.tolerance.printed_entry(entry, printed) for entry in entries]
-            truth = fixture2meas @ self.tolerance.frame_change(printed)
+            entries, part, frame = self.tolerance.printed_plan(entries, printed)
+            truth = fixture2meas @ frame
         if self.ball_radius_mm > 0:
-            entries = [self._centres(entry, printed) for entry in entries]
+            entries = [self._centres(entry, part) for entry in entries]
         touches, contacts = plan_touches(entries, fixture2meas)
         touches, contacts = perturb_touches(touches, contacts, rng, noise_mm, lever_mm)
         return touches, contacts, truth
