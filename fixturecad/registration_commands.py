@@ -23,6 +23,7 @@ SUCCESS_ROTATION_DEG = 0.1
 SUCCESS_BOUND_FACTOR = 6.0
 MAX_TRIALS = 100_000  # a day's run at the slowest fixtures' second a trial
 ANNOUNCED_S = 60.0  # a run predicted longer than this says how long before it goes on
+PARALLEL_S = 10.0  # a run predicted longer than this (in one process) runs in one process a core: starting one costs ~1 s
 PLOT_NAME = "simulation.png"
 SUMMARY_NAME = "simulation.json"
 
@@ -120,6 +121,7 @@ def simulate(
     force: Annotated[bool, typer.Option(help=f"Replace {SUMMARY_NAME} and {PLOT_NAME} written earlier.")] = False,
     unlabelled: Annotated[bool, typer.Option(help="Register the point touches without their labels (the bound is that of the same touches labelled).")] = False,
     anywhere: Annotated[bool, typer.Option(help="Draw the point touches anywhere on the part a probe reaches, not on the plan's features, and register them unlabelled, on any face (the bound: the same touches labelled with their faces).")] = False,
+    jobs: Annotated[int, typer.Option(min=0, help=f"Processes the trials run in (0: one a core where the run would take over {PARALLEL_S:g} s, else one); the trials are the same whatever the number.")] = 0,
 ):
     """Register synthetic noisy touches sampled on the STL; compare the errors with the Cramer-Rao bound.
 
@@ -127,13 +129,11 @@ def simulate(
     features spread evenly over the zone) and the errors are split: from the
     touch noise alone (a perfect part), from the part alone (no noise), in all.
     """
+    import multiprocessing
+    import os
     import time
 
     import numpy as np
-
-    from fixturecad.registration.deviations import tolerance_from_document
-    from fixturecad.registration.features import faces_from_json, features_from_json
-    from fixturecad.registration.sampling import TouchSampler, load_mesh
 
     if not 1 <= trials <= MAX_TRIALS:
         raise InputError(f"--trials must be from 1 to {MAX_TRIALS:,}, got {trials}")
@@ -157,35 +157,41 @@ def simulate(
     if touch_plan not in document["plans"]:
         document = {**document, "plans": {**document["plans"], **_designed_plan(out_dir, touch_plan)}}
     unlabelled = unlabelled or anywhere
+    sampling = (out_dir, document, touch_plan, plan is Positions.random, fixture_tolerance, anywhere)
     try:
-        features = {**features_from_json(document), **(faces_from_json(document) if anywhere else {})}
-        tolerance = tolerance_from_document(features, document, fixture_tolerance)
-        mesh = load_mesh(stl, document["volume_mm3"])
-        sampler = TouchSampler(document, mesh, touch_plan, plan is Positions.random, tolerance, anywhere)
+        sampler = _sampler(*sampling)
     except ValueError as error:
         raise InputError(str(error).splitlines()[0]) from None
+    tolerance = sampler.tolerance
     folder = check_files(out_dir if out is None else out, (SUMMARY_NAME, PLOT_NAME), force)
-    rng = np.random.default_rng(seed)
     # The residual test allows for the tessellation: chord errors spread over [0, tolerance].
     chord = float(document["files"]["stl_tolerance_mm"])
-    sigma = float(np.sqrt(noise**2 + chord**2 / 3.0))
-    # Before it starts: a trial of its own touches (its own generator, so that the trials' touches stay those
-    # of the seed), timed after one more that pays what only the first call does (imports, caches: the
+    options = (noise, float(np.sqrt(noise**2 + chord**2 / 3.0)), nominal, lever, fixture_tolerance, unlabelled)
+    # Before it starts: a trial of its own touches (its own generator: the trials' touches stay those of the
+    # seed), timed after one more that pays what only the first call does (imports, caches: the
     # quarter-sphere's first took two to four times the next). A whole trial: on a printed part its two
     # registrations from near the truth cost far less than the first.
     ahead = np.random.default_rng([seed, 1])
-    _trial(routine, sampler, ahead, noise, sigma, nominal, lever, fixture_tolerance, unlabelled)
+    _trial(routine, sampler, ahead, *options)
     start = time.perf_counter()
-    _trial(routine, sampler, ahead, noise, sigma, nominal, lever, fixture_tolerance, unlabelled)
+    _trial(routine, sampler, ahead, *options)
     one = time.perf_counter() - start
-    predicted = one * trials
+    workers = min(trials, (os.cpu_count() or 1) if jobs == 0 and one * trials > PARALLEL_S else max(jobs, 1))
+    predicted = one * trials / workers
     if predicted > ANNOUNCED_S:
-        typer.echo(f"simulate: about {predicted / 60:.0f} min for {trials} trials ({one:.2f} s a trial); "
-                   "Ctrl-C stops it, writing nothing", err=True)
+        typer.echo(f"simulate: about {predicted / 60:.0f} min for {trials} trials ({one:.2f} s a trial"
+                   f"{f', {workers} at a time' if workers > 1 else ''}); Ctrl-C stops it, writing nothing", err=True)
     records = []
-    with typer.progressbar(range(trials), label="simulating", file=_progress_stream()) as bar:
-        for _ in bar:
-            records.append(_trial(routine, sampler, rng, noise, sigma, nominal, lever, fixture_tolerance, unlabelled))
+    with typer.progressbar(length=trials, label="simulating", file=_progress_stream()) as bar:
+        if workers == 1:
+            for k in range(trials):
+                records.append(_trial(routine, sampler, _trial_generator(seed, k), *options))
+                bar.update(1)
+        else:
+            with multiprocessing.Pool(workers, _start_worker, (sampling, options, seed)) as pool:
+                for record in pool.imap(_worker_trial, range(trials)):
+                    records.append(record)
+                    bar.update(1)
     summary = summarise(records, noise)
     summary.update({"trials": trials, "unlabelled": unlabelled, "anywhere": anywhere, "noise_mm": noise, "lever_mm": lever, "plan": plan.value, "touch_plan": touch_plan, "seed": seed,
                     "nominal_pose": nominal, "fixture_tolerance_mm": None if tolerance is None else tolerance.zone_mm,
@@ -195,6 +201,54 @@ def simulate(
         plot_errors(records, summary, staging / PLOT_NAME)
     typer.echo(format_summary(summary))
     typer.echo(f"plot: {folder / PLOT_NAME}")
+
+
+def _sampler(out_dir, document, touch_plan, random_positions, fixture_tolerance, anywhere):
+    """simulate's TouchSampler on the fixture's STL (ValueError where the document lacks what it needs)."""
+    from fixturecad.registration.deviations import tolerance_from_document
+    from fixturecad.registration.features import faces_from_json, features_from_json
+    from fixturecad.registration.sampling import TouchSampler, load_mesh
+
+    features = {**features_from_json(document), **(faces_from_json(document) if anywhere else {})}
+    tolerance = tolerance_from_document(features, document, fixture_tolerance)
+    mesh = load_mesh(out_dir / "fixture.stl", document["volume_mm3"])
+    return TouchSampler(document, mesh, touch_plan, random_positions, tolerance, anywhere)
+
+
+def _trial_generator(seed, k):
+    """Trial k's own random generator: a trial's touches are the same whichever process draws them."""
+    import numpy as np
+
+    return np.random.default_rng([seed, 2, k])
+
+
+_WORKER = {}  # a worker process's routine, sampler and trial options (:func:`_start_worker`)
+
+
+def _start_worker(sampling, options, seed):
+    """A worker of simulate's pool. The parent answers Ctrl-C and SIGTERM, and says so; a worker whose parent
+    has gone fails to send its trial and ends, and what it would say of that goes nowhere. A setup that fails
+    is raised by the worker's first trial (a pool starts again, forever, a worker whose setup raises)."""
+    import os
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    nowhere = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(nowhere, 2)
+    os.close(nowhere)
+    try:
+        _WORKER.update(routine=load_routine(sampling[0]), sampler=_sampler(*sampling))
+    except Exception as error:  # (whatever it is, the parent raises it with the first trial)
+        _WORKER["error"] = error
+    _WORKER.update(options=options, seed=seed)
+
+
+def _worker_trial(k):
+    """Trial k in a worker process (:func:`_start_worker`)."""
+    if "error" in _WORKER:
+        raise _WORKER["error"]
+    return _trial(_WORKER["routine"], _WORKER["sampler"], _trial_generator(_WORKER["seed"], k), *_WORKER["options"])
 
 
 def _designed_plan(out_dir: Path, name: str) -> dict:

@@ -162,6 +162,12 @@ def test_simulate_seed_must_not_be_negative(cube):
     assert_bad_input(run("simulate", cube, "--seed", -1), "--seed")
 
 
+@pytest.mark.parametrize("jobs", [-1, "two"])
+def test_simulate_jobs_must_be_a_count(cube, jobs):
+    assert_bad_input(run("simulate", cube, "--jobs", jobs), "--jobs")
+    assert not (cube / "simulation.json").exists()
+
+
 JSON_CASES = {
     "radius null": ({"ball_radius_mm": None, "touches": [{"feature": "top", "points": [[1, 2, 50]]}]}, "ball_radius_mm"),
     "radius list": ({"ball_radius_mm": [1], "touches": [{"feature": "top", "points": [[1, 2, 50]]}]}, "ball_radius_mm"),
@@ -424,6 +430,44 @@ def test_an_interrupted_simulate_says_so_and_writes_nothing(cube, tmp_path, sign
     assert all(line.startswith("simulate: about ") for line in before) and len(before) <= 1
     assert not [p.name for p in cube.iterdir() if "simulation" in p.name]
     assert not (tmp_path / "results").exists()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupted_simulate_in_worker_processes_says_so_once_and_leaves_none_running(cube, tmp_path, signum):
+    """Stopped while its two workers run trials, the signal sent to them all as a terminal's Ctrl-C is: one line
+    (the workers' go nowhere), nothing written, and the workers gone within a trial (each fails to send its
+    trial to a parent that has gone)."""
+    out = tmp_path / "simulated"
+    process = subprocess.Popen([sys.executable, "-c", "from fixturecad.cli import main; main()", "simulate", str(cube),
+                                "--trials", "1000", "--jobs", "2", "--out", str(out)], stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    children = Path(f"/proc/{process.pid}/task/{process.pid}/children")
+    if not children.exists():
+        pytest.skip("no /proc to see a process's children")
+    deadline = time.monotonic() + 60
+    while len(workers := children.read_text().split()) < 2:
+        assert time.monotonic() < deadline and process.poll() is None
+        time.sleep(0.01)
+    time.sleep(0.5)  # (in their trials)
+    os.killpg(process.pid, signum)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signum
+    assert stderr.splitlines()[-1] == "fixturecad: interrupted; nothing was written"
+    assert stderr.count("interrupted") == 1 and "Traceback" not in stderr
+    assert not out.exists() and not [p.name for p in cube.iterdir() if "simulation" in p.name]
+    deadline = time.monotonic() + 30
+    while any(Path(f"/proc/{pid}").exists() and "(Z)" not in _state(pid) for pid in workers):
+        assert time.monotonic() < deadline, "a worker outlived its parent"
+        time.sleep(0.05)
+
+
+def _state(pid):
+    """A process's state letter in parentheses, as /proc/PID/status says it ('' once it is gone)."""
+    try:
+        line = next(line for line in Path(f"/proc/{pid}/status").read_text().splitlines() if line.startswith("State:"))
+    except (FileNotFoundError, ProcessLookupError):
+        return ""
+    return line.split(None, 2)[2] if len(line.split()) > 2 else ""
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])

@@ -129,6 +129,19 @@ def test_simulate_reports_errors_against_the_bound_and_writes_a_plot(built):
     assert json.loads((folder / "simulation.json").read_text())["plan"] == "random"
 
 
+def test_simulate_gives_the_same_trials_in_one_process_or_several(built, tmp_path):
+    """Each trial draws from its own generator of the seed: two worker processes give what one process gives
+    (the summary whole but its time), and another seed something else."""
+    folder = built("cube")
+    summaries = []
+    for jobs, seed in ((1, 5), (2, 5), (2, 6)):
+        out = run("simulate", folder, "--trials", 8, "--seed", seed, "--jobs", jobs, "--out", tmp_path / f"{jobs}-{seed}")
+        assert out.returncode == 0, out.stderr
+        summary = json.loads((tmp_path / f"{jobs}-{seed}" / "simulation.json").read_text())
+        summaries.append({key: value for key, value in summary.items() if key != "median_time_ms"})
+    assert summaries[0] == summaries[1] and summaries[2] != summaries[0]
+
+
 def test_simulate_writes_where_out_says(built, tmp_path):
     folder = built("cube")
     out = run("simulate", folder, "--trials", 3, "--out", tmp_path / "sim")
