@@ -23,7 +23,7 @@ SUCCESS_ROTATION_DEG = 0.1
 SUCCESS_BOUND_FACTOR = 6.0
 MAX_TRIALS = 100_000  # a day's run at the slowest fixtures' second a trial
 ANNOUNCED_S = 60.0  # a run predicted longer than this says how long before it goes on
-PARALLEL_S = 10.0  # a run predicted longer than this (in one process) runs in one process a core: starting one costs ~1 s
+PARALLEL_S = 10.0  # a run predicted longer than this in one process runs in one a core (each sets itself up first)
 PLOT_NAME = "simulation.png"
 SUMMARY_NAME = "simulation.json"
 
