@@ -23,7 +23,7 @@ SUCCESS_ROTATION_DEG = 0.1
 SUCCESS_BOUND_FACTOR = 6.0
 MAX_TRIALS = 100_000  # a day's run at the slowest fixtures' second a trial
 ANNOUNCED_S = 60.0  # a run predicted longer than this says how long before it goes on
-PARALLEL_S = 10.0  # a run predicted longer than this in one process runs in one a core (each sets itself up first)
+PARALLEL_S = 10.0  # the trials' time (s) a worker process is given at least: each sets itself up first
 PLOT_NAME = "simulation.png"
 SUMMARY_NAME = "simulation.json"
 
@@ -121,7 +121,7 @@ def simulate(
     force: Annotated[bool, typer.Option(help=f"Replace {SUMMARY_NAME} and {PLOT_NAME} written earlier.")] = False,
     unlabelled: Annotated[bool, typer.Option(help="Register the point touches without their labels (the bound is that of the same touches labelled).")] = False,
     anywhere: Annotated[bool, typer.Option(help="Draw the point touches anywhere on the part a probe reaches, not on the plan's features, and register them unlabelled, on any face (the bound: the same touches labelled with their faces).")] = False,
-    jobs: Annotated[int, typer.Option(min=0, help=f"Processes the trials run in (0: one a core where the run would take over {PARALLEL_S:g} s, else one); the trials are the same whatever the number.")] = 0,
+    jobs: Annotated[int, typer.Option(min=0, help=f"Processes the trials run in (0: up to one a core, each with {PARALLEL_S:g} s of trials or more); the trials are the same whatever the number.")] = 0,
 ):
     """Register synthetic noisy touches sampled on the STL; compare the errors with the Cramer-Rao bound.
 
@@ -129,6 +129,7 @@ def simulate(
     features spread evenly over the zone) and the errors are split: from the
     touch noise alone (a perfect part), from the part alone (no noise), in all.
     """
+    import math
     import multiprocessing
     import os
     import time
@@ -176,7 +177,7 @@ def simulate(
     start = time.perf_counter()
     _trial(routine, sampler, ahead, *options)
     one = time.perf_counter() - start
-    workers = min(trials, (os.cpu_count() or 1) if jobs == 0 and one * trials > PARALLEL_S else max(jobs, 1))
+    workers = min(trials, jobs or os.cpu_count() or 1, jobs or math.ceil(one * trials / PARALLEL_S))
     predicted = one * trials / workers
     if predicted > ANNOUNCED_S:
         typer.echo(f"simulate: about {predicted / 60:.0f} min for {trials} trials ({one:.2f} s a trial"
