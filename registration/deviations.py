@@ -164,10 +164,6 @@ class FixtureTolerance:
         """A printed part (dict id -> feature, nominal frame) with every mode uniform over its range."""
         return self.part(self.random_deviations(rng, zone_mm))
 
-    def frame_change(self, deviations):
-        """The printed part's datum frame in the nominal frame (4, 4), see :func:`.datums.frame_change`."""
-        return frame_change(self.scheme, self.features, self.part(deviations))
-
     def printed_plan(self, entries, deviations):
         """Touch-plan entries (fixture frame) made on the printed part of given mode coordinates instead of the
         model (:func:`entry_on`), the part (:meth:`part`) and its datum frame in the nominal frame (4, 4)

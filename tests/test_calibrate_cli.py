@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from cli import assert_bad_input, run
+from fixturecad.registration.datums import frame_change
 from fixturecad.registration.deviations import tolerance_from_document
 from fixturecad.registration.features import features_from_json
 from fixturecad.registration.patches import patch_points
@@ -37,7 +38,7 @@ def measurement_file(folder, path, zone_mm, count, seed, noise_mm=0.002):
         meas = points @ cad2meas[:3, :3].T + cad2meas[:3, 3] + rng.normal(scale=noise_mm, size=points.shape)
         lines += [f"{fid},{x:.6f},{y:.6f},{z:.6f}" for x, y, z in meas]
     path.write_text("\n".join(lines) + "\n")
-    return tolerance, deviations, cad2meas @ tolerance.frame_change(deviations)
+    return tolerance, deviations, cad2meas @ frame_change(tolerance.scheme, features, part)
 
 
 def test_build_records_tolerance_and_datums(cube):
