@@ -529,7 +529,9 @@ class Tree:
             mates = (owner[rounds, None] == owner[None, rounds]) & ~np.eye(len(rounds), dtype=bool)
             paired = mates.any(axis=1)
             i, j = rounds[paired], rounds[np.argmax(np.where(mates, across_core, -1.0), axis=1)[paired]]
-            self.pairs = np.unique(np.column_stack([np.minimum(i, j), np.maximum(i, j)]), axis=0).reshape(-1, 2)
+            n = len(b)
+            code = np.unique(np.minimum(i, j) * n + np.maximum(i, j))  # (numpy's unique of rows is slow)
+            self.pairs = np.column_stack([code // n, code % n])
         # Each paired touch's projector across its core, once a touch however many pairs it is in.
         self.paired, pair_index = np.unique(self.pairs, return_inverse=True) if len(self.pairs) else (np.zeros(0, int),) * 2
         self.pair_index = pair_index.reshape(-1, 2)
@@ -786,9 +788,6 @@ class Tree:
         if self.L is None:
             return
         twists = self.mode_twists * ~self.mode_radius[..., None]
-        centre = cross(twists[..., :3], self.anchor[:, None]) + twists[..., 3:]  # (n, k, 3)
-        self.centre_move = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", centre, self.L), ord=2, axis=(1, 2))
-        turn = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", twists[..., :3], self.L), ord=2, axis=(1, 2))
         self.radius_grow = np.sqrt(q) * np.linalg.norm(self.mode_radius @ self.L, axis=1)
         # About the anchor, or about the box's middle p (``omega x x + v = omega x (x - p) + (omega x p + v)``), the
         # nearer for a long boss anchored at one end.
@@ -798,8 +797,13 @@ class Tree:
         bounded = np.isfinite(far) & np.isfinite(half)
         far, half = np.where(bounded, far, 0.0), np.where(bounded, half, 0.0)
         middle = np.where(bounded[:, None], 0.5 * (self.low + self.high), 0.0)
-        at_middle = cross(twists[..., :3], middle[:, None]) + twists[..., 3:]
-        moved = np.sqrt(q) * np.linalg.norm(np.einsum("nki,kl->nil", at_middle, self.L), ord=2, axis=(1, 2))
+        # The largest move over |u| <= 1 of the anchor, of the turn and of the middle: each map's largest singular
+        # value, the root of its 3 by 3 Gram matrix's largest eigenvalue (cheaper than numpy's matrix 2-norm).
+        arms = np.stack([cross(twists[..., :3], self.anchor[:, None]) + twists[..., 3:], twists[..., :3],
+                         cross(twists[..., :3], middle[:, None]) + twists[..., 3:]])  # (3, n, k, 3)
+        maps = np.einsum("snki,kl->snil", arms, self.L)
+        largest = np.linalg.eigvalsh(maps @ maps.transpose(0, 1, 3, 2))[..., -1]
+        self.centre_move, turn, moved = np.sqrt(q * np.maximum(largest, 0.0))
         bound = np.minimum(self.centre_move + turn * far, moved + turn * half)
         # An unbounded patch gives no lever: where its feature turns, the touch keeps its deviation bound.
         own = self.round & self.radius_own & (bounded | (turn == 0.0))
