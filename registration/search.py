@@ -1468,9 +1468,13 @@ class Tree:
     def refined(self, Rs, ts):
         """Poses refined together by Gauss-Newton on the touches' rows and the bounded sensors': (Rs, ts); it stops
         after steps that all moved the touches too little for the test to see (the next would move them less)."""
-        length = self.full.scale()
+        # On a printed part touched by points and balls alone, on the test itself: the final refinement
+        # (:func:`.solve.solve`) starts where this ends, and ends within a step. (A sensor's rows there take a
+        # central difference for their radius: dearer than the steps saved.)
+        problem = self.judge if self.L is not None and self.judge is not None and self.sensors is None else self.full
+        length = problem.scale()
         for _ in range(REFINE_STEPS):
-            r, J = self.full.evaluate_batch(Rs, ts)
+            r, J = problem.evaluate_batch(Rs, ts)
             A = J.transpose(0, 2, 1) @ J
             A = A + 1e-9 * (np.trace(A, axis1=1, axis2=2)[:, None, None] + 1e-12) * np.eye(6)
             step = -np.linalg.solve(A, J.transpose(0, 2, 1) @ r[..., None])[..., 0]
