@@ -845,6 +845,23 @@ def test_the_true_pose_lies_in_a_region(name, counts, ball):
         assert any(m <= e for m, e in zip(moved, found.extents_mm)), (moved, found.extents_mm)
 
 
+@pytest.mark.parametrize("name", ["cube", "v-block", "inclined-plane-cylinder", "sphere-plate", "quarter-sphere"])
+def test_a_printed_part_s_region_poses_are_the_test_s_own_least(name):
+    """A printed part touched by points alone, on a random part its tolerance allows: each region's pose is where
+    the test's own refinement ends (from it Levenberg-Marquardt moves no touch by 1 % of sigma), so that solve's
+    refinement ends within a step. (From the exact rows' least it moved them by more than sigma.)"""
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        problem, _, _ = _problem(name, None, 0.0, rng, printed=True, deviated=True)
+        found = search(problem, threshold_mm2(problem))
+        assert found.poses, found.reason
+        points = Tree(problem, 1.0).points
+        for R, t in found.poses:
+            R2, t2, _, _ = levenberg_marquardt(problem, R, t)
+            moved = np.max(np.linalg.norm((points - t2) @ R2 - (points - t) @ R, axis=1))
+            assert moved < 0.01 * problem.sigma, (seed, moved)
+
+
 @pytest.mark.parametrize("name", ["cube", "quarter-sphere", "inclined-plane-cylinder", "sphere-plate"])
 def test_the_deviation_bound_holds_on_the_patch(name):
     """A feature's largest row variance, from its patch box's corners (planes) or grid, is no smaller than
