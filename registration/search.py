@@ -1466,12 +1466,13 @@ class Tree:
         return start_R, start_y, centre, reach
 
     def refined(self, Rs, ts):
-        """Poses refined together by Gauss-Newton on the touches' rows and the bounded sensors': (Rs, ts); it stops
-        after steps that all moved the touches too little for the test to see (the next would move them less)."""
-        # On a printed part touched by points and balls alone, on the test itself: the final refinement
-        # (:func:`.solve.solve`) starts where this ends, and ends within a step. (A sensor's rows there take a
-        # central difference for their radius: dearer than the steps saved.)
-        problem = self.judge if self.L is not None and self.judge is not None and self.sensors is None else self.full
+        """Poses refined together by Gauss-Newton on the touches' rows and the bounded sensors', or on the test:
+        (Rs, ts); it stops after steps that all moved the touches too little for the test to see (the next would move
+        them less)."""
+        # Where points and balls alone are touched, on the test itself (on a printed part, deviations and all): the
+        # final refinement (:func:`.solve.solve`) starts where this ends, and ends within a step. (A sensor's rows
+        # there take a central difference for their radius: dearer than the steps saved.)
+        problem = self.full if self.sensors is not None or self.judge is None else self.judge
         length = problem.scale()
         for _ in range(REFINE_STEPS):
             r, J = problem.evaluate_batch(Rs, ts)
