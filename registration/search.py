@@ -69,7 +69,7 @@ from .patches import patch_box
 from .pose import point_covariances, rotation_from_vector, skew, vector_from_rotation
 from .problem import Problem, subset
 from .sensor_bounds import Printed, SensorBounds, bounded
-from .stand_ins import deviation_bound_mm, stand_ins
+from .stand_ins import deviation_bound_mm, largest_move, stand_ins
 from .verdict import CHI2_CONFIDENCE, EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, chi_square_quantile
 
 FIRST_CELLS = 8  # rotation-vector boxes per axis of [-pi, pi]^3 at the first level
@@ -797,13 +797,10 @@ class Tree:
         bounded = np.isfinite(far) & np.isfinite(half)
         far, half = np.where(bounded, far, 0.0), np.where(bounded, half, 0.0)
         middle = np.where(bounded[:, None], 0.5 * (self.low + self.high), 0.0)
-        # The largest move over |u| <= 1 of the anchor, of the turn and of the middle: each map's largest singular
-        # value, the root of its 3 by 3 Gram matrix's largest eigenvalue (cheaper than numpy's matrix 2-norm).
+        # The largest move of the anchor, of the turn and of the middle, in one call.
         arms = np.stack([cross(twists[..., :3], self.anchor[:, None]) + twists[..., 3:], twists[..., :3],
                          cross(twists[..., :3], middle[:, None]) + twists[..., 3:]])  # (3, n, k, 3)
-        maps = np.einsum("snki,kl->snil", arms, self.L)
-        largest = np.linalg.eigvalsh(maps @ maps.transpose(0, 1, 3, 2))[..., -1]
-        self.centre_move, turn, moved = np.sqrt(q * np.maximum(largest, 0.0))
+        self.centre_move, turn, moved = np.sqrt(q) * largest_move(arms, self.L @ self.L.T)
         bound = np.minimum(self.centre_move + turn * far, moved + turn * half)
         # An unbounded patch gives no lever: where its feature turns, the touch keeps its deviation bound.
         own = self.round & self.radius_own & (bounded | (turn == 0.0))
@@ -1490,9 +1487,8 @@ class Tree:
 def _largest_turn(tolerance, fid, q):
     """The largest turn (rad) of a printed feature that a pose that passes allows: ``sqrt(q lambda_max)`` of its
     turn's covariance."""
-    turn = tolerance.modes[fid].twists[:, :3]
     s = tolerance.covariance[tolerance.slices[fid], tolerance.slices[fid]]
-    return float(np.sqrt(q * max(np.linalg.eigvalsh(turn.T @ s @ turn)[-1], 0.0)))
+    return float(np.sqrt(q) * largest_move(tolerance.modes[fid].twists[:, :3], s))
 
 
 def contact_offset(group):

@@ -177,9 +177,14 @@ def deviation_bound_mm(tolerance, feature, places, q):
     S = tolerance.covariance[s, s]
     twist = np.where(m.radius[:, None], 0.0, m.twists)
     A = cross(twist[None, :, :3], np.asarray(places, float)[:, None]) + twist[None, :, 3:]  # (n, k, 3)
-    largest = np.linalg.eigvalsh(np.einsum("nki,kl,nlj->nij", A, S, A))[:, -1]
     radius = m.radius.astype(float)
-    return float(np.sqrt(q) * (np.sqrt(np.max(np.maximum(largest, 0.0))) + np.sqrt(max(radius @ S @ radius, 0.0))))
+    return float(np.sqrt(q) * (np.max(largest_move(A, S)) + np.sqrt(max(radius @ S @ radius, 0.0))))
+
+
+def largest_move(A, S):
+    """The largest move ``sqrt(lambda_max(A^T S A))`` of maps A (..., k, 3) from mode coordinates z to a vector,
+    over ``z^T S^-1 z <= 1`` (S (k, k) the modes' covariance): times sqrt(q) for the modes of a pose that passes."""
+    return np.sqrt(np.maximum(np.linalg.eigvalsh(np.swapaxes(A, -1, -2) @ S @ A)[..., -1], 0.0))
 
 
 def _corners(feature):
