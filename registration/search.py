@@ -50,7 +50,8 @@ that pose does; a region is split finer until its pose passes and its extent
 is small beside its pose's own valley of poses that pass, or is dropped when
 its pose fails by more than its extent can make up (:meth:`Tree.regions`). A
 search given a ``stop`` ends at the first pose it meets that passes but is too
-weakly determined to judge: that pose alone makes the answer underdetermined.
+weakly determined to judge, or at a settled region that passes too wide to
+judge: that pose or region alone makes the answer underdetermined.
 
 This module imports numpy only and nothing of fixturecad: it is inlined into
 the generated standalone ``register.py``.
@@ -92,7 +93,7 @@ RANK_ROTATIONS = np.array([[0.0, 0.0, 0.0], [0.9, -0.4, 0.3], [-0.5, 1.1, 0.7]])
 NARROW_ANGLE = 4.0  # rad: a cell whose rotation vectors are shorter than this is narrowed to its model's ellipsoid ...
 NARROW_GAIN = 0.5  # ... when that at least halves its rotation box
 WEAK_TRY_CELLS = 1000  # a level keeping more cells than this (a valley of poses) tries its best pose on ``stop`` ...
-WEAK_TRIES = 2  # ... at most this many times a search, and as many wide regions' poses that pass
+WEAK_TRIES = 2  # ... at most this many times a search, as many wide regions' poses that pass, as many settled
 FIRST_TURN_PLANES = 4  # planes' normals a search starts from at most (two signs each: 2^4 choices)
 TUBE_BOXES = 512  # rotation boxes about one plane's measured normal a search starts from at most, each sign
 ROUND_TURN_SPREAD = 2.0  # where round touches are, a turn is split once it moves them more than half the y box is wide
@@ -126,11 +127,12 @@ class Regions:
 
 
 class WeakPose(Exception):
-    """The search's ``stop`` called a pose too weakly determined to judge: ``found``, what it returned."""
+    """The search's ``stop`` called a pose too weakly determined to judge, or the region about it too wide
+    (``extent_mm``, mm; None: a pose alone): ``found``, what it returned."""
 
-    def __init__(self, found):
+    def __init__(self, found, extent_mm=None):
         super().__init__()
-        self.found = found
+        self.found, self.extent_mm = found, extent_mm
 
 
 class Tries:
@@ -140,11 +142,11 @@ class Tries:
     def __init__(self, stop, left):
         self.stop, self.left = stop, left if stop is not None else 0
 
-    def __call__(self, R, t):
+    def __call__(self, R, t, extent_mm=None):
         self.left -= 1
-        found = self.stop(R, t)
+        found = self.stop(R, t, extent_mm)
         if found is not None:
-            raise WeakPose(found)
+            raise WeakPose(found, extent_mm)
 
 
 def threshold_mm2(problem):
@@ -1313,26 +1315,30 @@ class Tree:
         searched leave wide: a region whose pose passes is settled however wide (splitting it finer would not
         narrow it), and the search stops past ``PARTIAL_CELLS`` cells (the rows searched leave the pose weak).
 
-        ``stop(R, t)``: what it finds from (R, t) when a pose refined from it passes but the touches determine it
-        too weakly to judge, else None. Such a pose makes the answer underdetermined whatever else passes, so
-        where a valley of poses keeps many cells its best pose is tried, and so is a region that passes wider
-        than a patch's widening (``WEAK_TRIES`` times each at most); the search stops at the first weak one
-        (``weak``, not complete)."""
+        ``stop(R, t, extent_mm)``: what it finds from (R, t) when a pose refined from it passes but the touches
+        determine it too weakly to judge, or (given the ``extent_mm`` of a settled region about it) when that
+        region of poses that may pass is too wide to judge, else None. Such a pose makes the answer
+        underdetermined whatever else passes, so where a valley of poses keeps many cells its best pose is tried,
+        and so is a region that passes wider than a patch's widening, unsettled or settled (``WEAK_TRIES`` times
+        each at most); the search stops at the first weak one (``weak``, not complete)."""
         kept = []
         try:
-            return self._regions(partial, Tries(stop, WEAK_TRIES), Tries(stop, WEAK_TRIES), kept)
+            return self._regions(partial, *(Tries(stop, WEAK_TRIES) for _ in range(3)), kept)
         except WeakPose as weak:
-            return Regions(complete=False, cells=kept, weak=weak.found, reason="stopped at a pose that passes but that "
-                           "the touches leave free or determine too weakly to judge")
+            reason = "stopped at a pose that passes but that the touches leave free or determine too weakly to judge" \
+                if weak.extent_mm is None else (f"stopped at a region of poses that may pass {weak.extent_mm:.2f} mm "
+                                                "wide, wider than a patch's widening")
+            return Regions(complete=False, cells=kept, weak=weak.found, reason=reason)
 
-    def _regions(self, partial, level_tries, region_tries, kept):
-        """:meth:`regions`' search, its stop tried on valleys' cells and on wide regions' poses."""
+    def _regions(self, partial, level_tries, region_tries, wide_tries, kept):
+        """:meth:`regions`' search, its stop tried on valleys' cells and on wide regions' poses, unsettled and
+        settled."""
         start = self.first_cells()
         budget = PARTIAL_CELLS if partial else None
         leaves, reason = self.leaves(*start, LEAF_FRACTION, kept, budget, level_tries)
         if leaves is None:
             return Regions(complete=False, reason=reason, cells=kept)
-        fraction, nearest = LEAF_FRACTION, None
+        fraction, nearest, tried = LEAF_FRACTION, None, set()
         for _ in range(RESOLVE_ROUNDS + 1):
             found = self.found(leaves)
             if found and (nearest is None or found[0].cost < nearest.cost):
@@ -1349,11 +1355,16 @@ class Tree:
             if not unsettled:
                 return Regions([r.pose for r in found], [r.extent_mm for r in found], cells=kept,
                                nearest=nearest and nearest.pose)
-            # Regions that pass but reach farther than a patch's widening may be a weak pose's valley.
-            wide = [k for k in unsettled if found[k].passes and found[k].extent_mm > EXTENT_WIDENING_MAX_MM]
-            wide.sort(key=lambda k: -found[k].extent_mm)  # the widest first: the likeliest to be weak
-            for k in wide[:region_tries.left]:
-                region_tries(*found[k].pose)
+            # Regions that pass but reach farther than a patch's widening, each pose once, the widest first.
+            # Unsettled, one may be a weak pose's valley; settled, as it stays, it makes the answer underdetermined
+            # (:func:`.solve.judged_all`: no pose of it can be judged), tried with its extent.
+            wide = [k for k, region in enumerate(found) if region.passes and region.extent_mm > EXTENT_WIDENING_MAX_MM
+                    and (k in unsettled or not partial) and region.pose[1].tobytes() not in tried]
+            for k in sorted(wide, key=lambda k: -found[k].extent_mm):
+                tries = region_tries if k in unsettled else wide_tries
+                if tries.left > 0:
+                    tried.add(found[k].pose[1].tobytes())
+                    tries(*found[k].pose, None if k in unsettled else found[k].extent_mm)
             fraction /= 4.0
             members = np.concatenate([found[k].members for k in unsettled])
             settled = leaves.take(~np.isin(np.arange(len(leaves.v)), members))

@@ -17,7 +17,7 @@ from .pose import check_fixture2meas
 from .search import mahalanobis, search, threshold_mm2
 from .starts import best_starts, initial_poses
 from .verdict import (EXTENT_TOLERANCE_MM, EXTENT_WIDENING_MAX_MM, SAME_POSE_CHI2, Solution, chi_square_passes,
-                      inadmissible, judged, same_as_any)
+                      inadmissible, judged, same_as_which)
 
 LOCAL_STARTS = 96  # closed-form starts refined when the search does not complete
 
@@ -92,19 +92,17 @@ def judged_all(problem, solutions, starts, refined, extents=(), found=None, good
     for k, ((R, t), (R2, t2, r, J, cost)) in enumerate(zip(starts, refined)):
         if good_only and not chi_square_passes(cost, problem.size, 6, problem.sigma):
             continue  # (it fails the test at rank 6: not good at any rank)
-        if same_as_any((R2, t2), [(s.rotation, s.translation) for s in solutions]):
-            continue
-        if r is None:
-            r, J = problem.evaluate(R2, t2)
-        solution = judged(problem, Solution(R2, t2, r, J), length)
+        listed = same_as_which((R2, t2), [(s.rotation, s.translation) for s in solutions])
+        if listed is None:
+            if r is None:
+                r, J = problem.evaluate(R2, t2)
+            solutions.append(judged(problem, Solution(R2, t2, r, J), length))
+        solution = solutions[-1 if listed is None else listed]
         if k < len(extents):
-            # The region's extent about where the search left it, and how far refinement moved the touches.
-            reach.append(extents[k] + _moved_mm(problem, (R, t), (R2, t2)))
-            # Wide: some pose of the region that may pass lies too far from this one to be judged by it, unless
-            # this pose puts a point or ball touch farther off its patch than the region reaches (then none is).
-            solution.wide = reach[-1] > EXTENT_WIDENING_MAX_MM and not inadmissible(
-                followed, R2, t2, tolerance=EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + reach[-1], approaches=False)
-        solutions.append(solution)
+            # A region refined to a pose listed already reaches about that pose: it widens that pose's judgement.
+            wide, region_reach = _wide(problem, followed, extents[k], (R, t), (R2, t2))
+            solution.wide |= wide
+            reach.append(region_reach)
     if good_only:
         solutions[:] = [s for s in solutions if s.good]
     solutions.sort(key=lambda s: (not (s.passes and s.admissible), s.cost))
@@ -126,14 +124,27 @@ def judged_all(problem, solutions, starts, refined, extents=(), found=None, good
 
 def _weak_stop(problem):
     """The search's ``stop``: the :class:`.verdict.Solution` refined from (R, t) when it passes, on its patches,
-    but with rank under 6 or too weakly determined to judge (the verdict's ``weak``), else None. One such pose
-    makes the answer underdetermined (:func:`.engine.register_touches`), whatever else passes: no further search
-    can change it."""
-    def stop(R, t):
-        R, t, r, J = levenberg_marquardt(problem, R, t)
-        s = judged(problem, Solution(R, t, r, J), problem.scale())
-        return s if s.passes and s.admissible and (s.rank < 6 or s.weak) else None
+    but with rank under 6 or too weakly determined to judge (the verdict's ``weak``), or, given the ``extent_mm``
+    of a settled region about (R, t), when that region is wide (:func:`_wide`); else None. One such pose makes the
+    answer underdetermined (:func:`.engine.register_touches`), whatever else passes: no further search can change
+    it."""
+    def stop(R, t, extent_mm=None):
+        R2, t2, r, J = levenberg_marquardt(problem, R, t)
+        s = judged(problem, Solution(R2, t2, r, J), problem.scale())
+        if extent_mm is not None:
+            s.wide = _wide(problem, problem.point_touches(), extent_mm, (R, t), (R2, t2))[0]
+        return s if s.passes and ((s.admissible and (s.rank < 6 or s.weak)) or s.wide) else None
     return stop
+
+
+def _wide(problem, followed, extent_mm, start, pose):
+    """Whether some pose of a region that may pass lies too far from ``pose`` to be judged by it: the region's
+    reach about ``pose`` (its ``extent_mm`` about ``start``, where the search left it, and how far refinement moved
+    the touches) beyond a patch's widening, unless ``pose`` puts a point or ball touch (of ``followed``) farther
+    off its patch than the region reaches (then none is admissible); and that reach (mm)."""
+    reach = extent_mm + _moved_mm(problem, start, pose)
+    return reach > EXTENT_WIDENING_MAX_MM and not inadmissible(
+        followed, *pose, tolerance=EXTENT_TOLERANCE_MM + EXTENT_WIDENING_MAX_MM + reach, approaches=False), reach
 
 
 def _moved_mm(problem, a, b):
@@ -151,11 +162,14 @@ def told_apart(solutions, sigma):
     kept = Solutions()
     for name in ("search", "reason", "extent_mm", "cells"):
         setattr(kept, name, getattr(solutions, name))
+    def inside(k, s):
+        return k.good and mahalanobis(k.rotation, k.translation, k.jacobian.T @ k.jacobian / sigma**2,
+                                      s.rotation[None], s.translation[None])[0] < SAME_POSE_CHI2
+
     for s in solutions:
-        if s.good and any(
-                k.good and mahalanobis(k.rotation, k.translation, k.jacobian.T @ k.jacobian / sigma**2,
-                                       s.rotation[None], s.translation[None])[0] < SAME_POSE_CHI2
-                for k in kept):
-            continue
-        kept.append(s)
+        same = next((k for k in kept if inside(k, s)), None) if s.good else None
+        if same is None:
+            kept.append(s)
+        else:
+            same.wide |= s.wide  # its region's poses lie about the pose it is
     return kept

@@ -25,14 +25,20 @@ SAME_POSE_ROTATION_RAD = 1e-4
 SAME_POSE_TRANSLATION_MM = 1e-3
 
 
-def same_as_any(pose, others):
-    """Whether a pose (R, t) is one of ``others`` [(R, t)]: turned less than ``SAME_POSE_ROTATION_RAD`` and moved
-    less than ``SAME_POSE_TRANSLATION_MM`` from it (all compared at once)."""
+def same_as_which(pose, others):
+    """The index of the first of ``others`` [(R, t)] that a pose (R, t) is, or None: turned less than
+    ``SAME_POSE_ROTATION_RAD`` and moved less than ``SAME_POSE_TRANSLATION_MM`` from it (all compared at once)."""
     if not len(others):
-        return False
+        return None
     rotations, translations = (np.array(x) for x in zip(*others))
-    return bool(np.any((rotation_angle(pose[0] @ rotations.transpose(0, 2, 1)) < SAME_POSE_ROTATION_RAD)
-                       & (np.linalg.norm(translations - pose[1], axis=1) < SAME_POSE_TRANSLATION_MM)))
+    same = np.flatnonzero((rotation_angle(pose[0] @ rotations.transpose(0, 2, 1)) < SAME_POSE_ROTATION_RAD)
+                          & (np.linalg.norm(translations - pose[1], axis=1) < SAME_POSE_TRANSLATION_MM))
+    return int(same[0]) if len(same) else None
+
+
+def same_as_any(pose, others):
+    """Whether a pose (R, t) is one of ``others`` [(R, t)] (:func:`same_as_which`)."""
+    return same_as_which(pose, others) is not None
 
 
 def distinct(solutions):

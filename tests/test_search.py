@@ -1093,6 +1093,53 @@ def test_a_pose_that_leaves_a_motion_free_stops_the_search():
     assert result["free_motions"][0].startswith("screw motion")
 
 
+def test_a_region_refined_to_a_pose_listed_already_widens_that_pose():
+    """A region whose pose refines to one listed already holds poses about that one: where it reaches farther
+    than a patch's widening, that pose is judged wide (the answer `underdetermined`, docs/registration.md), and
+    the search's extent counts its reach; so does a good pose told apart from nothing but a better one's
+    confidence region. (Before, such a region or pose was dropped, and its reach with it.)"""
+    from fixturecad.registration.search import Regions
+    from fixturecad.registration.solve import Solutions, judged_all, told_apart
+    from fixturecad.registration.verdict import EXTENT_WIDENING_MAX_MM, Solution, judged
+
+    problem, R, t = _problem("cube", {"top": 3, "front": 2, "left": 1}, 0.0, np.random.default_rng(5))
+    starts = [(R, t), (rotation_from_vector(np.array([1e-3, -2e-3, 0.0])) @ R, t + 0.05)]
+    refined = [(R2, t2, r, J, float(r @ r)) for R2, t2, r, J in (levenberg_marquardt(problem, *s) for s in starts)]
+    for extent_mm in (0.2, 5.0):
+        solutions = Solutions()
+        solutions.search = "complete"
+        out = judged_all(problem, solutions, starts, refined, [0.1, extent_mm], Regions())
+        assert len(out) == 1 and out[0].good and out[0].wide == (extent_mm > EXTENT_WIDENING_MAX_MM)
+        assert out.extent_mm >= extent_mm
+
+    R2, t2, r, J, _ = refined[0]
+    best = judged(problem, Solution(R2, t2, r, J), problem.scale())
+    near = judged(problem, Solution(R2, t2 + 0.001, *problem.evaluate(R2, t2 + 0.001)), problem.scale())
+    near.wide = True
+    kept = told_apart(Solutions([best, near]), problem.sigma)
+    assert best.good and near.good and len(kept) == 1 and kept[0] is best and best.wide
+
+
+@pytest.mark.parametrize("name,index", [("v-block 2-2-2", 334), ("Example Two 3+3", 315)])
+def test_a_settled_region_wider_than_a_patch_s_widening_stops_the_search(monkeypatch, name, index):
+    """A settled region of poses that may pass, wider than a patch's widening, makes the answer `underdetermined`
+    whatever else passes (it is not split again, and no pose of it can be judged): the search stops at it, the
+    reason naming its width, and the same search run to its end says `underdetermined` too. (Noise-free layouts
+    of `tests/search_cases.py` whose search ran to its end so before the stop.)"""
+    from fixturecad.registration import solve
+    from fixturecad.registration.engine import register_touches
+    from fixturecad.registration.touchfile import exit_code
+    from search_cases import CASES, layout
+
+    lay = layout(next(c for c in CASES if c.name == name), 0.0, index)
+    result = register_touches(lay.features, lay.touches)
+    assert result["status"] == "underdetermined" and result["search"] == "incomplete" and exit_code(result) == 4
+    assert result["search_reason"].startswith("stopped at a region of poses that may pass")
+    monkeypatch.setattr(solve, "search", lambda problem, threshold, stop=None: search(problem, threshold))
+    full = register_touches(lay.features, lay.touches)
+    assert full["status"] == "underdetermined" and full["search"] == "complete"
+
+
 def _edge_modes(tolerance, fid, q, rng, count):
     """``count`` mode vectors z (count, k) of a printed feature as far as a pose that passes allows: ``z = L u``
     (``L L^T`` its modes' covariance), ``|u|^2 = q``, u's direction at random."""
