@@ -162,7 +162,8 @@ def told_apart(solutions, sigma):
     kept = Solutions()
     for name in ("search", "reason", "extent_mm", "cells"):
         setattr(kept, name, getattr(solutions, name))
-    def inside(k, s):
+
+    def inside(k, s):  # whether s lies inside good k's confidence region
         return k.good and mahalanobis(k.rotation, k.translation, k.jacobian.T @ k.jacobian / sigma**2,
                                       s.rotation[None], s.translation[None])[0] < SAME_POSE_CHI2
 
