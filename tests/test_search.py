@@ -1096,8 +1096,9 @@ def test_a_pose_that_leaves_a_motion_free_stops_the_search():
 def test_a_region_refined_to_a_pose_listed_already_widens_that_pose():
     """A region whose pose refines to one listed already holds poses about that one: where it reaches farther
     than a patch's widening, that pose is judged wide (the answer `underdetermined`, docs/registration.md), and
-    the search's extent counts its reach; so does a good pose told apart from nothing but a better one's
-    confidence region. (Before, such a region or pose was dropped, and its reach with it.)"""
+    the search's extent counts its reach; a wide good pose merged into a better one (inside its confidence
+    region, :func:`told_apart`) makes that one wide. (Before, such a region or pose was dropped, and its reach
+    with it.)"""
     from fixturecad.registration.search import Regions
     from fixturecad.registration.solve import Solutions, judged_all, told_apart
     from fixturecad.registration.verdict import EXTENT_WIDENING_MAX_MM, Solution, judged
